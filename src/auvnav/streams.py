@@ -1,0 +1,332 @@
+"""Typed time series read from and written to tables, with strict validation.
+
+A stream is a frozen dataclass of equal-length numpy arrays (SI units, radians) that declares how its
+fields map to file columns (with the file's units). :func:`read_table` reads a ``.csv`` or ``.parquet``
+file and reports every problem (file, row, column) instead of guessing; :meth:`Stream.to_frame` and
+:func:`write_table` give the file form back. Rows are 1-based data rows (the CSV header is not counted).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar, Literal, TypeVar
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from auvnav.errors import DiveFormatError, Problem
+
+log = logging.getLogger(__name__)
+
+Kind = Literal["float", "bool", "str"]
+S = TypeVar("S", bound="Stream")
+
+#: At most this many rows are named for one kind of problem in one column; the rest are counted.
+MAX_ROWS_NAMED = 5
+
+
+@dataclass(frozen=True)
+class Field:
+    """How one stream attribute is stored in a file.
+
+    Parameters
+    ----------
+    name : str
+        Attribute name on the stream (SI units in the name).
+    columns : tuple of str
+        File columns (file units in the names); several columns make an (N, k) array.
+    scale : float
+        Multiply file values by this to get the attribute's SI value (``np.pi / 180`` for degrees).
+    kind : {"float", "bool", "str"}
+    required : bool
+        False for columns that may be absent; the attribute is then None.
+    check : callable, optional
+        ``check(values_in_file_units) -> message or None``, a plausibility test on the whole column.
+    """
+
+    name: str
+    columns: tuple[str, ...]
+    scale: float = 1.0
+    kind: Kind = "float"
+    required: bool = True
+    check: Callable[[np.ndarray], str | None] | None = None
+
+
+def within(lo: float, hi: float, unit: str, hint: str = "") -> Callable[[np.ndarray], str | None]:
+    """A plausibility check: every value in [lo, hi] (file units)."""
+
+    def check(v: np.ndarray) -> str | None:
+        bad = (v < lo) | (v > hi)
+        if not bad.any():
+            return None
+        row = int(np.flatnonzero(bad)[0]) + 1
+        return (
+            f"{int(bad.sum())} value(s) outside [{lo:g}, {hi:g}] {unit}, first {v[row - 1]:g} "
+            f"at row {row}{hint}"
+        )
+
+    return check
+
+
+def looks_like_radians(v: np.ndarray) -> str | None:
+    """Flag a degree column that holds radians: every value within +-2 pi yet spread over > 3 units.
+
+    A heading in degrees that stays within +-6.3 degrees of north can only spread over a few degrees;
+    a spread of 3 units inside +-2 pi is a vehicle turning through more than 170 degrees in radians.
+    """
+    finite = v[np.isfinite(v)]
+    if finite.size < 3 or np.abs(finite).max() > 2 * np.pi + 1e-9 or np.ptp(finite) <= 3.0:
+        return None
+    return (
+        f"values span {finite.min():.3f} to {finite.max():.3f}, all within +-2 pi: "
+        "these are radians, the column declares degrees"
+    )
+
+
+@dataclass(frozen=True)
+class Stream:
+    """Base of every typed stream: equal-length arrays with ``t_s`` strictly increasing."""
+
+    FIELDS: ClassVar[tuple[Field, ...]]
+    FILE: ClassVar[str]
+
+    def __post_init__(self) -> None:
+        n = None
+        for f in self.FIELDS:
+            value = getattr(self, f.name)
+            if value is None:
+                if f.required:
+                    raise ValueError(f"{type(self).__name__}.{f.name} is required")
+                continue
+            arr = np.asarray(value)
+            want = (len(f.columns),) if len(f.columns) > 1 else ()
+            if arr.ndim != 1 + len(want) or arr.shape[1:] != want:
+                raise ValueError(
+                    f"{type(self).__name__}.{f.name} must have shape (N{', ' + str(want[0]) if want else ''}); "
+                    f"found {arr.shape}"
+                )
+            n = arr.shape[0] if n is None else n
+            if arr.shape[0] != n:
+                raise ValueError(
+                    f"{type(self).__name__} fields must share one length; found {arr.shape[0]} and {n}"
+                )
+        t = np.asarray(self.t_s)  # type: ignore[attr-defined]
+        if t.size > 1 and not np.all(np.diff(t) > 0):
+            raise ValueError(f"{type(self).__name__}.t_s must be strictly increasing")
+
+    def __len__(self) -> int:
+        return len(self.t_s)  # type: ignore[attr-defined]
+
+    @classmethod
+    def from_columns(cls: type[S], values: dict[str, NDArray]) -> S:
+        """Build from file-unit columns (already validated), converting to SI."""
+        kwargs = {}
+        for f in cls.FIELDS:
+            if not all(c in values for c in f.columns):
+                kwargs[f.name] = None
+                continue
+            cols = [values[c] for c in f.columns]
+            if f.kind == "float":
+                arr = np.stack([np.asarray(c, dtype=float) * f.scale for c in cols], -1)
+            elif f.kind == "bool":
+                arr = np.stack([np.asarray(c, dtype=bool) for c in cols], -1)
+            else:
+                arr = np.stack([np.asarray(c, dtype=str) for c in cols], -1)
+            kwargs[f.name] = arr if len(f.columns) > 1 else arr[:, 0]
+        return cls(**kwargs)
+
+    def to_frame(self) -> pd.DataFrame:
+        """The file form: one column per file column, in file units."""
+        data: dict[str, NDArray] = {}
+        for f in self.FIELDS:
+            value = getattr(self, f.name)
+            if value is None:
+                continue
+            arr = np.asarray(value)
+            arr = arr.reshape(len(arr), -1)
+            for k, c in enumerate(f.columns):
+                col = arr[:, k]
+                data[c] = col / f.scale if f.kind == "float" else col
+        return pd.DataFrame(data)
+
+    def select(self: S, mask: NDArray[np.bool_]) -> S:
+        """A new stream with the rows where ``mask`` is true."""
+        return dataclasses.replace(
+            self,
+            **{
+                f.name: None if getattr(self, f.name) is None else getattr(self, f.name)[mask]
+                for f in self.FIELDS
+            },
+        )
+
+
+def _read_raw(path: Path, display: str) -> tuple[pd.DataFrame | None, list[Problem]]:
+    """Read a CSV or Parquet file as strings/numbers without interpretation."""
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".parquet":
+            return pd.read_parquet(path), []
+        raw = path.read_bytes()
+        if b"\x00" in raw[:65536]:
+            return None, [Problem(display, "not a CSV text file (binary content)")]
+        try:
+            raw.decode("utf-8")
+        except UnicodeDecodeError as err:
+            return None, [Problem(display, f"not a CSV text file (not UTF-8 at byte {err.start})")]
+        frame = pd.read_csv(path, comment="#", skipinitialspace=True, dtype=str, keep_default_na=False)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, ValueError, OSError) as err:
+        kind = "Parquet" if suffix == ".parquet" else "CSV"
+        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        return None, [Problem(display, f"not a readable {kind} file ({first})")]
+    frame.columns = [str(c).strip() for c in frame.columns]
+    return frame, []
+
+
+def _rows(mask: NDArray[np.bool_]) -> tuple[list[int], int]:
+    idx = np.flatnonzero(mask)
+    return [int(i) + 1 for i in idx[:MAX_ROWS_NAMED]], int(idx.size)
+
+
+def _parse_column(series: pd.Series, kind: Kind, display: str, column: str) -> tuple[NDArray, list[Problem]]:
+    """Parse one column; name the rows that are not numbers, are NaN, or are not booleans."""
+    problems: list[Problem] = []
+    if kind == "str":
+        values = series.astype(str).str.strip().to_numpy()
+        rows, n = _rows(values == "")
+        problems += [Problem(display, "empty value", r, column) for r in rows]
+        if n > len(rows):
+            problems.append(Problem(display, f"{n - len(rows)} more empty values", None, column))
+        return values, problems
+    if kind == "bool":
+        text = series.astype(str).str.strip().str.lower()
+        mapping = {"1": True, "0": False, "true": True, "false": False, "1.0": True, "0.0": False}
+        ok = text.isin(list(mapping))
+        rows, n = _rows(~ok.to_numpy())
+        problems += [
+            Problem(display, f"not a boolean ({series.iloc[r - 1]!r}; use 1/0)", r, column) for r in rows
+        ]
+        if n > len(rows):
+            problems.append(Problem(display, f"{n - len(rows)} more non-boolean values", None, column))
+        return text.map(mapping).fillna(False).to_numpy(dtype=bool), problems
+    if series.dtype.kind in "fiub":
+        values = series.to_numpy(dtype=float)
+        bad_number = np.zeros(len(values), dtype=bool)
+    else:
+        text = series.astype(str).str.strip()
+        values = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
+        is_nan_text = text.str.lower().isin(["nan", "", "na", "null", "none"]).to_numpy()
+        bad_number = np.isnan(values) & ~is_nan_text
+    rows, n = _rows(bad_number)
+    problems += [Problem(display, f"not a number ({series.iloc[r - 1]!r})", r, column) for r in rows]
+    if n > len(rows):
+        problems.append(Problem(display, f"{n - len(rows)} more values that are not numbers", None, column))
+    rows, n = _rows(~np.isfinite(values) & ~bad_number)
+    problems += [Problem(display, "NaN or infinite value", r, column) for r in rows]
+    if n > len(rows):
+        problems.append(Problem(display, f"{n - len(rows)} more NaN or infinite values", None, column))
+    return values, problems
+
+
+def _check_time(t: NDArray, display: str, column: str) -> list[Problem]:
+    problems: list[Problem] = []
+    dt = np.diff(t)
+    rows, n = _rows(np.concatenate([[False], dt < 0]))
+    problems += [
+        Problem(display, f"timestamp out of order ({t[r - 1]:.6f} after {t[r - 2]:.6f})", r, column)
+        for r in rows
+    ]
+    if n > len(rows):
+        problems.append(Problem(display, f"{n - len(rows)} more timestamps out of order", None, column))
+    rows, n = _rows(np.concatenate([[False], dt == 0]))
+    problems += [Problem(display, f"duplicate timestamp {t[r - 1]:.6f}", r, column) for r in rows]
+    if n > len(rows):
+        problems.append(Problem(display, f"{n - len(rows)} more duplicate timestamps", None, column))
+    return problems
+
+
+def read_table(
+    path: Path, fields: tuple[Field, ...], display: str | None = None
+) -> tuple[dict[str, NDArray], list[Problem], list[str]]:
+    """Read and check a table against its fields.
+
+    Returns
+    -------
+    values : dict
+        File-unit columns by name (only when there are no problems; else empty).
+    problems : list of Problem
+        Everything wrong, one entry per file/row/column.
+    warnings : list of str
+        Things worth saying that are not errors (unknown columns).
+    """
+    display = display or str(path)
+    frame, problems = _read_raw(path, display)
+    if frame is None:
+        return {}, problems, []
+    known = {c for f in fields for c in f.columns}
+    warnings = [f"{display}: unknown column {c!r} ignored" for c in frame.columns if c not in known]
+    for f in fields:
+        for c in f.columns:
+            if f.required and c not in frame.columns:
+                problems.append(Problem(display, "missing required column", None, c))
+    if problems:
+        return {}, problems, warnings
+    if len(frame) == 0:
+        return {}, [Problem(display, "no data rows")], warnings
+    values: dict[str, NDArray] = {}
+    for f in fields:
+        for c in f.columns:
+            if c not in frame.columns:
+                continue
+            values[c], col_problems = _parse_column(frame[c], f.kind, display, c)
+            problems += col_problems
+            if f.check is not None and not col_problems:
+                message = f.check(values[c])
+                if message:
+                    problems.append(Problem(display, message, None, c))
+    time_col = fields[0].columns[0]
+    if time_col in values and not any(p.column == time_col for p in problems):
+        problems += _check_time(values[time_col], display, time_col)
+    return (values if not problems else {}), problems, warnings
+
+
+def read_stream(cls: type[S], path: Path, display: str | None = None) -> S:
+    """Read one stream file, raising :class:`DiveFormatError` with every problem found."""
+    values, problems, warnings = read_table(path, cls.FIELDS, display)
+    for w in warnings:
+        log.warning(w)
+    if problems:
+        raise DiveFormatError(problems)
+    return cls.from_columns(values)
+
+
+def atomic_write(path: Path, write: Callable[[Path], None]) -> None:
+    """Write a file through a temporary sibling and a rename, so no half-written file is left."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        write(Path(tmp))
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_table(frame: pd.DataFrame, path: Path) -> None:
+    """Write a table as CSV (shortest round-trip floats) or Parquet, by the file's suffix; atomically."""
+    if path.suffix.lower() == ".parquet":
+        atomic_write(path, lambda p: frame.to_parquet(p, index=False))
+    else:
+        atomic_write(path, lambda p: frame.to_csv(p, index=False))
+
+
+def write_stream(stream: Stream, path: Path) -> None:
+    """Write a stream in file units, CSV or Parquet by suffix."""
+    write_table(stream.to_frame(), path)

@@ -1,0 +1,468 @@
+"""Vehicle configuration (``vehicle.yaml``): sensor mounts, lever arms, noise figures, stereo rig.
+
+Checked strictly: an unknown key is an error, a rotation must be a rotation. Mounts give the sensor's
+rotation into the body frame (``R_body_sensor``, or ``rpy_deg`` as roll, pitch, yaw of Euler ZYX) and its
+lever arm in body FRD. Noise figures are 1-sigma. The stereo rig is inline or imported from an OpenCV
+``FileStorage`` YAML (``stereoCalibrate`` output) or a pair of ROS ``camera_info`` YAML files.
+
+Default noise figures (the ``DEFAULT_*`` constants) describe the paper's class of vehicle, ACFR's
+Sirius (Williams et al. 2012, "Monitoring of benthic reference sites", IEEE Robotics & Automation
+Magazine 19(1)): a Teledyne RDI Workhorse Navigator 1200 kHz DVL (long-term accuracy +-0.2% +-1 mm/s,
+RDI datasheet), a flux-gate compass with inclinometer of the PNI TCM2 class (heading +-1 deg after
+calibration, tilt +-0.2 deg: PNI TCM2 datasheet; the paper's section II-C gives the same one-degree
+budget), and a Paroscientific Digiquartz pressure sensor (0.01% of full scale: Paroscientific 8000
+series datasheet; 0.1 dbar for a 1000 dbar rating).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import yaml
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, model_validator
+
+from auvnav.errors import ConfigError, Problem
+from auvnav.frames import euler2rot, is_rotation, rot2euler
+
+FloatArray = NDArray[np.float64]
+
+DEFAULT_DVL_VELOCITY_SIGMA_MPS = 0.003  # RDI Workhorse 1200 kHz: single-ping noise at 0.5 m/s, 2 m range
+DEFAULT_DVL_SCALE_SIGMA = 0.002  # RDI Workhorse long-term accuracy +-0.2%
+DEFAULT_DVL_MAX_ALTITUDE_M = 30.0  # RDI Workhorse 1200 kHz bottom-track range
+DEFAULT_HEADING_SIGMA_DEG = 1.0  # PNI TCM2 heading accuracy; paper section II-C
+DEFAULT_PITCH_ROLL_SIGMA_DEG = 0.2  # PNI TCM2 tilt accuracy
+DEFAULT_PRESSURE_SIGMA_DBAR = 0.1  # Digiquartz 0.01% of a 1000 dbar full scale
+DEFAULT_GPS_SIGMA_M = 3.0  # consumer GPS horizontal accuracy, 1 sigma
+DEFAULT_USBL_SIGMA_M = 5.0  # USBL at 100 m slant range, ~ 0.5% of range plus ship motion
+
+# ---------------------------------------------------------------------------------------------
+# Typed configuration (SI, radians)
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Mount:
+    """Where a sensor sits on the body.
+
+    Parameters
+    ----------
+    R_body_sensor : ndarray, shape (3, 3)
+        Maps sensor-frame vectors into the body frame (FRD).
+    lever_arm_body_m : ndarray, shape (3,)
+        Sensor origin relative to the vehicle reference point, metres, body FRD.
+    """
+
+    R_body_sensor: FloatArray = field(default_factory=lambda: np.eye(3))
+    lever_arm_body_m: FloatArray = field(default_factory=lambda: np.zeros(3))
+
+    def __post_init__(self) -> None:
+        if not is_rotation(self.R_body_sensor):
+            raise ValueError(
+                f"R_body_sensor is not a rotation (orthonormal, det +1); found {self.R_body_sensor!r}"
+            )
+        if np.shape(self.lever_arm_body_m) != (3,):
+            raise ValueError(
+                f"lever_arm_body_m must have shape (3,); found {np.shape(self.lever_arm_body_m)}"
+            )
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    """Pinhole camera with OpenCV radial-tangential distortion.
+
+    Parameters
+    ----------
+    width, height : int
+        Image size, pixels.
+    K : ndarray, shape (3, 3)
+        Intrinsic matrix, pixels.
+    D : ndarray, shape (k,)
+        Distortion (k1, k2, p1, p2[, k3]), OpenCV order.
+    """
+
+    width: int
+    height: int
+    K: FloatArray
+    D: FloatArray = field(default_factory=lambda: np.zeros(5))
+
+    def __post_init__(self) -> None:
+        if self.width <= 0 or self.height <= 0:
+            raise ValueError(f"image size must be positive; found {self.width}x{self.height}")
+        K = np.asarray(self.K)
+        if K.shape != (3, 3) or K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]):
+            raise ValueError(
+                f"K must be a 3x3 intrinsic matrix with positive focal lengths; found {K.tolist()}"
+            )
+
+    @property
+    def hfov_rad(self) -> float:
+        """Horizontal field of view (undistorted pinhole), radians."""
+        return float(2 * np.arctan(self.width / (2 * self.K[0, 0])))
+
+    def scaled(self, factor: float) -> CameraModel:
+        """The same camera for images resized by ``factor`` (pixel-centre convention)."""
+        S = np.diag([factor, factor, 1.0])
+        K = S @ self.K
+        K[0, 2] = (self.K[0, 2] + 0.5) * factor - 0.5
+        K[1, 2] = (self.K[1, 2] + 0.5) * factor - 0.5
+        return CameraModel(round(self.width * factor), round(self.height * factor), K, self.D.copy())
+
+
+@dataclass(frozen=True)
+class StereoRig:
+    """A calibrated stereo pair mounted on the body.
+
+    ``X_right = R_right_left @ X_left + t_right_left_m`` (OpenCV ``stereoCalibrate``'s R, T).
+    ``mount`` places the left camera (z forward along the optical axis, x right, y down in the image)
+    in the body frame.
+    """
+
+    left: CameraModel
+    right: CameraModel
+    R_right_left: FloatArray
+    t_right_left_m: FloatArray
+    mount: Mount
+
+    def __post_init__(self) -> None:
+        if not is_rotation(self.R_right_left):
+            raise ValueError("R_right_left is not a rotation")
+        if np.shape(self.t_right_left_m) != (3,) or np.linalg.norm(self.t_right_left_m) <= 0:
+            raise ValueError(f"t_right_left_m must be a non-zero 3-vector; found {self.t_right_left_m!r}")
+
+    @property
+    def baseline_m(self) -> float:
+        return float(np.linalg.norm(self.t_right_left_m))
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """Sensor mounts and noise figures (1 sigma, SI)."""
+
+    name: str = "auv"
+    dvl: Mount = field(default_factory=Mount)
+    dvl_velocity_sigma_mps: float = DEFAULT_DVL_VELOCITY_SIGMA_MPS
+    dvl_scale_sigma: float = DEFAULT_DVL_SCALE_SIGMA
+    dvl_max_altitude_m: float = DEFAULT_DVL_MAX_ALTITUDE_M
+    compass: Mount = field(default_factory=Mount)
+    heading_sigma_rad: float = float(np.radians(DEFAULT_HEADING_SIGMA_DEG))
+    pitch_roll_sigma_rad: float = float(np.radians(DEFAULT_PITCH_ROLL_SIGMA_DEG))
+    pressure: Mount = field(default_factory=Mount)
+    pressure_sigma_pa: float = DEFAULT_PRESSURE_SIGMA_DBAR * 1e4
+    gps: Mount = field(default_factory=Mount)
+    gps_sigma_m: float = DEFAULT_GPS_SIGMA_M
+    usbl_sigma_m: float = DEFAULT_USBL_SIGMA_M
+    stereo: StereoRig | None = None
+
+
+# ---------------------------------------------------------------------------------------------
+# vehicle.yaml schema (file units: degrees, dbar)
+# ---------------------------------------------------------------------------------------------
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def _vec3(v: list[float]) -> list[float]:
+    if len(v) != 3:
+        raise ValueError(f"must have 3 elements; found {len(v)}")
+    return v
+
+
+class _MountFile(_Strict):
+    R_body_sensor: list[list[float]] | None = None
+    rpy_deg: list[float] | None = None
+    lever_arm_m: list[float] = [0.0, 0.0, 0.0]
+
+    _lever = field_validator("lever_arm_m")(_vec3)
+
+    @model_validator(mode="after")
+    def _rotation(self) -> _MountFile:
+        if self.R_body_sensor is not None and self.rpy_deg is not None:
+            raise ValueError("give R_body_sensor or rpy_deg, not both")
+        if self.rpy_deg is not None:
+            _vec3(self.rpy_deg)
+        if self.R_body_sensor is not None and not is_rotation(np.asarray(self.R_body_sensor, dtype=float)):
+            raise ValueError(
+                f"R_body_sensor is not a rotation (orthonormal with det +1): {self.R_body_sensor}"
+            )
+        return self
+
+    def to_mount(self) -> Mount:
+        if self.rpy_deg is not None:
+            r, p, y = np.radians(self.rpy_deg)
+            R = euler2rot(y, p, r)
+        else:
+            R = np.asarray(self.R_body_sensor if self.R_body_sensor is not None else np.eye(3), dtype=float)
+        return Mount(R, np.asarray(self.lever_arm_m, dtype=float))
+
+
+class _DvlFile(_Strict):
+    mount: _MountFile = _MountFile()
+    velocity_sigma_mps: float = DEFAULT_DVL_VELOCITY_SIGMA_MPS
+    scale_sigma: float = DEFAULT_DVL_SCALE_SIGMA
+    max_altitude_m: float = DEFAULT_DVL_MAX_ALTITUDE_M
+
+
+class _CompassFile(_Strict):
+    mount: _MountFile = _MountFile()
+    heading_sigma_deg: float = DEFAULT_HEADING_SIGMA_DEG
+    pitch_roll_sigma_deg: float = DEFAULT_PITCH_ROLL_SIGMA_DEG
+
+
+class _PressureSensorFile(_Strict):
+    mount: _MountFile = _MountFile()
+    sigma_dbar: float = DEFAULT_PRESSURE_SIGMA_DBAR
+
+
+class _GpsFile(_Strict):
+    mount: _MountFile = _MountFile()
+    sigma_m: float = DEFAULT_GPS_SIGMA_M
+
+
+class _UsblFile(_Strict):
+    sigma_m: float = DEFAULT_USBL_SIGMA_M
+
+
+class _CameraFile(_Strict):
+    width: int
+    height: int
+    K: list[list[float]]
+    D: list[float] = [0.0, 0.0, 0.0, 0.0, 0.0]
+
+
+class _StereoFile(_Strict):
+    mount: _MountFile = _MountFile()
+    left: _CameraFile | None = None
+    right: _CameraFile | None = None
+    R_right_left: list[list[float]] | None = None
+    t_right_left_m: list[float] | None = None
+    calibration_file: str | list[str] | None = None
+    calibration_format: Literal["opencv", "ros"] | None = None
+
+    @model_validator(mode="after")
+    def _one_source(self) -> _StereoFile:
+        inline = [self.left, self.right, self.R_right_left, self.t_right_left_m]
+        if self.calibration_file is None and any(v is None for v in inline):
+            raise ValueError("give left, right, R_right_left and t_right_left_m, or calibration_file")
+        if self.calibration_file is not None and any(v is not None for v in inline):
+            raise ValueError("give an inline calibration or calibration_file, not both")
+        if self.calibration_file is not None and self.calibration_format is None:
+            raise ValueError("calibration_file needs calibration_format: opencv or ros")
+        return self
+
+
+class _VehicleFile(_Strict):
+    name: str = "auv"
+    dvl: _DvlFile = _DvlFile()
+    compass: _CompassFile = _CompassFile()
+    pressure: _PressureSensorFile = _PressureSensorFile()
+    gps: _GpsFile = _GpsFile()
+    usbl: _UsblFile = _UsblFile()
+    stereo: _StereoFile | None = None
+
+
+def _camera(c: _CameraFile) -> CameraModel:
+    return CameraModel(c.width, c.height, np.asarray(c.K, dtype=float), np.asarray(c.D, dtype=float))
+
+
+def read_opencv_stereo(path: Path) -> tuple[CameraModel, CameraModel, FloatArray, FloatArray]:
+    """Read an OpenCV ``FileStorage`` stereo calibration (YAML or XML).
+
+    Accepts the names OpenCV's samples and ``stereoCalibrate`` users write: ``K1``/``M1``/
+    ``cameraMatrix1``, ``D1``/``distCoeffs1`` (and 2), ``R``, ``T``, and the image size as
+    ``image_width``/``image_height`` or ``imageSize``. ``T`` is in metres.
+    """
+    import cv2
+
+    if not path.is_file():
+        raise ConfigError(f"{path}: calibration file not found")
+    try:
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    except cv2.error as err:
+        raise ConfigError(
+            f"{path}: not an OpenCV FileStorage file ({str(err).strip().splitlines()[-1]})"
+        ) from err
+    if not fs.isOpened():
+        raise ConfigError(f"{path}: not an OpenCV FileStorage file")
+
+    def mat(*names: str) -> FloatArray:
+        for n in names:
+            node = fs.getNode(n)
+            if not node.empty():
+                m = node.mat()
+                if m is not None:
+                    return np.asarray(m, dtype=float)
+        raise ConfigError(f"{path}: missing matrix {' / '.join(names)}")
+
+    def number(name: str) -> float | None:
+        node = fs.getNode(name)
+        return None if node.empty() else float(node.real())
+
+    w, h = number("image_width"), number("image_height")
+    if w is None or h is None:
+        size = fs.getNode("imageSize")
+        if size.empty():
+            raise ConfigError(f"{path}: missing image_width/image_height or imageSize")
+        w, h = float(size.at(0).real()), float(size.at(1).real())
+    left = CameraModel(int(w), int(h), mat("K1", "M1", "cameraMatrix1"), mat("D1", "distCoeffs1").ravel())
+    right = CameraModel(int(w), int(h), mat("K2", "M2", "cameraMatrix2"), mat("D2", "distCoeffs2").ravel())
+    R, T = mat("R"), mat("T").ravel()
+    fs.release()
+    return left, right, R, T
+
+
+def read_ros_stereo(
+    left_path: Path, right_path: Path
+) -> tuple[CameraModel, CameraModel, FloatArray, FloatArray]:
+    """Read a stereo pair from two ROS ``camera_info`` YAML files (``camera_calibration`` output).
+
+    The extrinsics come from the rectification rotations R1, R2 and the right projection matrix, whose
+    ``P[0, 3] = -fx' * baseline``: ``R_right_left = R2^T R1``, ``t_right_left = -R2^T [b, 0, 0]``.
+    """
+    infos = []
+    for p in (left_path, right_path):
+        if not p.is_file():
+            raise ConfigError(f"{p}: calibration file not found")
+        try:
+            d = yaml.safe_load(p.read_text(encoding="utf-8"))
+            K = np.asarray(d["camera_matrix"]["data"], dtype=float).reshape(3, 3)
+            D = np.asarray(d["distortion_coefficients"]["data"], dtype=float)
+            R = np.asarray(d["rectification_matrix"]["data"], dtype=float).reshape(3, 3)
+            P = np.asarray(d["projection_matrix"]["data"], dtype=float).reshape(3, 4)
+            cam = CameraModel(int(d["image_width"]), int(d["image_height"]), K, D)
+        except (yaml.YAMLError, KeyError, TypeError, ValueError) as err:
+            raise ConfigError(f"{p}: not a ROS camera_info YAML ({type(err).__name__}: {err})") from err
+        if d.get("distortion_model", "plumb_bob") not in ("plumb_bob", "rational_polynomial"):
+            raise ConfigError(f"{p}: unsupported distortion_model {d.get('distortion_model')!r}")
+        infos.append((cam, R, P))
+    (left, R1, _), (right, R2, P2) = infos
+    baseline = -P2[0, 3] / P2[0, 0]
+    if baseline == 0:
+        raise ConfigError(
+            f"{right_path}: projection_matrix has no baseline (P[0,3] = 0); is it the right camera?"
+        )
+    return left, right, R2.T @ R1, -R2.T @ np.array([baseline, 0.0, 0.0])
+
+
+def _stereo(s: _StereoFile, base: Path) -> StereoRig:
+    if s.left and s.right and s.R_right_left and s.t_right_left_m:
+        left, right = _camera(s.left), _camera(s.right)
+        R, t = np.asarray(s.R_right_left, dtype=float), np.asarray(s.t_right_left_m, dtype=float)
+    elif s.calibration_format == "opencv":
+        if not isinstance(s.calibration_file, str):
+            raise ConfigError("stereo.calibration_file: an OpenCV calibration is one file")
+        left, right, R, t = read_opencv_stereo(base / s.calibration_file)
+    else:
+        files = s.calibration_file
+        if not isinstance(files, list) or len(files) != 2:
+            raise ConfigError("stereo.calibration_file: a ROS calibration is two files [left, right]")
+        left, right, R, t = read_ros_stereo(base / files[0], base / files[1])
+    return StereoRig(left, right, R, t, s.mount.to_mount())
+
+
+def vehicle_from_mapping(data: Any, *, base: Path, display: str = "vehicle.yaml") -> Vehicle:
+    """Build a :class:`Vehicle` from a parsed vehicle.yaml mapping (paths relative to ``base``)."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{display}: must be a mapping of keys to values")
+    try:
+        f = _VehicleFile.model_validate(data)
+        stereo = _stereo(f.stereo, base) if f.stereo is not None else None
+    except ValidationError as err:
+        from auvnav.dive import pydantic_problems
+
+        raise ConfigError("\n".join(str(p) for p in pydantic_problems(err, display))) from err
+    except ValueError as err:
+        raise ConfigError(f"{display}: key stereo: {err}") from err
+    return Vehicle(
+        name=f.name,
+        dvl=f.dvl.mount.to_mount(),
+        dvl_velocity_sigma_mps=f.dvl.velocity_sigma_mps,
+        dvl_scale_sigma=f.dvl.scale_sigma,
+        dvl_max_altitude_m=f.dvl.max_altitude_m,
+        compass=f.compass.mount.to_mount(),
+        heading_sigma_rad=float(np.radians(f.compass.heading_sigma_deg)),
+        pitch_roll_sigma_rad=float(np.radians(f.compass.pitch_roll_sigma_deg)),
+        pressure=f.pressure.mount.to_mount(),
+        pressure_sigma_pa=f.pressure.sigma_dbar * 1e4,
+        gps=f.gps.mount.to_mount(),
+        gps_sigma_m=f.gps.sigma_m,
+        usbl_sigma_m=f.usbl.sigma_m,
+        stereo=stereo,
+    )
+
+
+def vehicle_problems(path: Path, *, display: str = "vehicle.yaml") -> tuple[Vehicle | None, list[Problem]]:
+    """Read vehicle.yaml, returning the vehicle or the problems found (never raises for content)."""
+    from auvnav.dive import load_yaml
+
+    data, problems = load_yaml(path, display)
+    if problems:
+        return None, problems
+    try:
+        return vehicle_from_mapping(data, base=path.parent, display=display), []
+    except ConfigError as err:
+        lines = str(err).splitlines()
+        return None, [Problem(display, line.removeprefix(f"{display}: ")) for line in lines]
+
+
+def read_vehicle(path: Path) -> Vehicle:
+    """Read and check vehicle.yaml; raise :class:`ConfigError` naming the file and key."""
+    vehicle, problems = vehicle_problems(Path(path), display=str(path))
+    if vehicle is None:
+        raise ConfigError("\n".join(str(p) for p in problems))
+    return vehicle
+
+
+def _mount_yaml(m: Mount) -> dict[str, Any]:
+    return {"R_body_sensor": m.R_body_sensor.tolist(), "lever_arm_m": m.lever_arm_body_m.tolist()}
+
+
+def _camera_yaml(c: CameraModel) -> dict[str, Any]:
+    return {"width": c.width, "height": c.height, "K": c.K.tolist(), "D": c.D.tolist()}
+
+
+def vehicle_to_mapping(v: Vehicle) -> dict[str, Any]:
+    """The vehicle.yaml mapping (file units); stereo calibrations are written inline."""
+    out: dict[str, Any] = {
+        "name": v.name,
+        "dvl": {
+            "mount": _mount_yaml(v.dvl),
+            "velocity_sigma_mps": v.dvl_velocity_sigma_mps,
+            "scale_sigma": v.dvl_scale_sigma,
+            "max_altitude_m": v.dvl_max_altitude_m,
+        },
+        "compass": {
+            "mount": _mount_yaml(v.compass),
+            "heading_sigma_deg": float(np.degrees(v.heading_sigma_rad)),
+            "pitch_roll_sigma_deg": float(np.degrees(v.pitch_roll_sigma_rad)),
+        },
+        "pressure": {"mount": _mount_yaml(v.pressure), "sigma_dbar": v.pressure_sigma_pa / 1e4},
+        "gps": {"mount": _mount_yaml(v.gps), "sigma_m": v.gps_sigma_m},
+        "usbl": {"sigma_m": v.usbl_sigma_m},
+    }
+    if v.stereo is not None:
+        s = v.stereo
+        out["stereo"] = {
+            "mount": _mount_yaml(s.mount),
+            "left": _camera_yaml(s.left),
+            "right": _camera_yaml(s.right),
+            "R_right_left": s.R_right_left.tolist(),
+            "t_right_left_m": s.t_right_left_m.tolist(),
+        }
+    return out
+
+
+def write_vehicle(v: Vehicle, path: Path) -> None:
+    """Write vehicle.yaml (inline stereo calibration)."""
+    path.write_text(yaml.safe_dump(vehicle_to_mapping(v), sort_keys=False), encoding="utf-8")
+
+
+def mount_rpy_rad(m: Mount) -> tuple[float, float, float]:
+    """A mount's rotation as (roll, pitch, yaw), radians, Euler ZYX."""
+    y, p, r = rot2euler(m.R_body_sensor)
+    return float(r), float(p), float(y)
