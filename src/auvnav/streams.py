@@ -25,7 +25,7 @@ from auvnav.errors import DiveFormatError, Problem
 
 log = logging.getLogger(__name__)
 
-Kind = Literal["float", "bool", "str"]
+Kind = Literal["float", "int", "bool", "str"]
 S = TypeVar("S", bound="Stream")
 
 #: At most this many rows are named for one kind of problem in one column; the rest are counted.
@@ -92,10 +92,13 @@ def looks_like_radians(v: np.ndarray) -> str | None:
 
 @dataclass(frozen=True)
 class Stream:
-    """Base of every typed stream: equal-length arrays with ``t_s`` strictly increasing."""
+    """Base of every typed stream: equal-length arrays; the first field is the time (strictly increasing
+    unless ``TIME_ORDERED`` is false)."""
 
     FIELDS: ClassVar[tuple[Field, ...]]
     FILE: ClassVar[str]
+    #: False for tables whose rows are not a time series (loop closures): no ordering is required.
+    TIME_ORDERED: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
         n = None
@@ -117,12 +120,12 @@ class Stream:
                 raise ValueError(
                     f"{type(self).__name__} fields must share one length; found {arr.shape[0]} and {n}"
                 )
-        t = np.asarray(self.t_s)  # type: ignore[attr-defined]
-        if t.size > 1 and not np.all(np.diff(t) > 0):
-            raise ValueError(f"{type(self).__name__}.t_s must be strictly increasing")
+        t = np.asarray(getattr(self, self.FIELDS[0].name))
+        if self.TIME_ORDERED and t.size > 1 and not np.all(np.diff(t) > 0):
+            raise ValueError(f"{type(self).__name__}.{self.FIELDS[0].name} must be strictly increasing")
 
     def __len__(self) -> int:
-        return len(self.t_s)  # type: ignore[attr-defined]
+        return len(getattr(self, self.FIELDS[0].name))
 
     @classmethod
     def from_columns(cls: type[S], values: dict[str, NDArray]) -> S:
@@ -135,6 +138,8 @@ class Stream:
             cols = [values[c] for c in f.columns]
             if f.kind == "float":
                 arr = np.stack([np.asarray(c, dtype=float) * f.scale for c in cols], -1)
+            elif f.kind == "int":
+                arr = np.stack([np.asarray(c, dtype=np.int64) for c in cols], -1)
             elif f.kind == "bool":
                 arr = np.stack([np.asarray(c, dtype=bool) for c in cols], -1)
             else:
@@ -189,31 +194,33 @@ def _read_raw(path: Path, display: str) -> tuple[pd.DataFrame | None, list[Probl
     return frame, []
 
 
-def _rows(mask: NDArray[np.bool_]) -> tuple[list[int], int]:
+def _flag(
+    mask: NDArray[np.bool_], display: str, column: str, describe: Callable[[int], str], more: str
+) -> list[Problem]:
+    """One problem per flagged row for the first few rows (1-based), then a count of the rest."""
     idx = np.flatnonzero(mask)
-    return [int(i) + 1 for i in idx[:MAX_ROWS_NAMED]], int(idx.size)
+    problems = [Problem(display, describe(int(i) + 1), int(i) + 1, column) for i in idx[:MAX_ROWS_NAMED]]
+    if idx.size > MAX_ROWS_NAMED:
+        problems.append(Problem(display, f"{idx.size - MAX_ROWS_NAMED} more {more}", None, column))
+    return problems
 
 
 def _parse_column(series: pd.Series, kind: Kind, display: str, column: str) -> tuple[NDArray, list[Problem]]:
-    """Parse one column; name the rows that are not numbers, are NaN, or are not booleans."""
-    problems: list[Problem] = []
+    """Parse one column; name the rows that are empty, not numbers, NaN, not integers or not booleans."""
     if kind == "str":
         values = series.astype(str).str.strip().to_numpy()
-        rows, n = _rows(values == "")
-        problems += [Problem(display, "empty value", r, column) for r in rows]
-        if n > len(rows):
-            problems.append(Problem(display, f"{n - len(rows)} more empty values", None, column))
-        return values, problems
+        return values, _flag(values == "", display, column, lambda r: "empty value", "empty values")
     if kind == "bool":
         text = series.astype(str).str.strip().str.lower()
         mapping = {"1": True, "0": False, "true": True, "false": False, "1.0": True, "0.0": False}
-        ok = text.isin(list(mapping))
-        rows, n = _rows(~ok.to_numpy())
-        problems += [
-            Problem(display, f"not a boolean ({series.iloc[r - 1]!r}; use 1/0)", r, column) for r in rows
-        ]
-        if n > len(rows):
-            problems.append(Problem(display, f"{n - len(rows)} more non-boolean values", None, column))
+        bad = ~text.isin(list(mapping)).to_numpy()
+        problems = _flag(
+            bad,
+            display,
+            column,
+            lambda r: f"not a boolean ({series.iloc[r - 1]!r}; use 1/0)",
+            "non-boolean values",
+        )
         return text.map(mapping).fillna(False).to_numpy(dtype=bool), problems
     if series.dtype.kind in "fiub":
         values = series.to_numpy(dtype=float)
@@ -223,38 +230,45 @@ def _parse_column(series: pd.Series, kind: Kind, display: str, column: str) -> t
         values = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
         is_nan_text = text.str.lower().isin(["nan", "", "na", "null", "none"]).to_numpy()
         bad_number = np.isnan(values) & ~is_nan_text
-    rows, n = _rows(bad_number)
-    problems += [Problem(display, f"not a number ({series.iloc[r - 1]!r})", r, column) for r in rows]
-    if n > len(rows):
-        problems.append(Problem(display, f"{n - len(rows)} more values that are not numbers", None, column))
-    rows, n = _rows(~np.isfinite(values) & ~bad_number)
-    problems += [Problem(display, "NaN or infinite value", r, column) for r in rows]
-    if n > len(rows):
-        problems.append(Problem(display, f"{n - len(rows)} more NaN or infinite values", None, column))
+    non_finite = ~np.isfinite(values) & ~bad_number
+    problems = _flag(
+        bad_number,
+        display,
+        column,
+        lambda r: f"not a number ({series.iloc[r - 1]!r})",
+        "values that are not numbers",
+    )
+    problems += _flag(
+        non_finite, display, column, lambda r: "NaN or infinite value", "NaN or infinite values"
+    )
+    if kind == "int":
+        fractional = np.isfinite(values) & (values != np.round(values))
+        problems += _flag(
+            fractional, display, column, lambda r: f"not an integer ({values[r - 1]!r})", "non-integers"
+        )
     return values, problems
 
 
 def _check_time(t: NDArray, display: str, column: str) -> list[Problem]:
-    problems: list[Problem] = []
-    dt = np.diff(t)
-    rows, n = _rows(np.concatenate([[False], dt < 0]))
-    problems += [
-        Problem(display, f"timestamp out of order ({t[r - 1]:.6f} after {t[r - 2]:.6f})", r, column)
-        for r in rows
-    ]
-    if n > len(rows):
-        problems.append(Problem(display, f"{n - len(rows)} more timestamps out of order", None, column))
-    rows, n = _rows(np.concatenate([[False], dt == 0]))
-    problems += [Problem(display, f"duplicate timestamp {t[r - 1]:.6f}", r, column) for r in rows]
-    if n > len(rows):
-        problems.append(Problem(display, f"{n - len(rows)} more duplicate timestamps", None, column))
-    return problems
+    earlier = np.concatenate([[False], np.diff(t) < 0])
+    repeated = np.concatenate([[False], np.diff(t) == 0])
+    return _flag(
+        earlier,
+        display,
+        column,
+        lambda r: f"timestamp out of order ({t[r - 1]:.6f} after {t[r - 2]:.6f})",
+        "timestamps out of order",
+    ) + _flag(
+        repeated, display, column, lambda r: f"duplicate timestamp {t[r - 1]:.6f}", "duplicate timestamps"
+    )
 
 
 def read_table(
-    path: Path, fields: tuple[Field, ...], display: str | None = None
+    path: Path, fields: tuple[Field, ...], display: str | None = None, *, time_ordered: bool = True
 ) -> tuple[dict[str, NDArray], list[Problem], list[str]]:
     """Read and check a table against its fields.
+
+    With ``time_ordered`` the first field is the time and must be strictly increasing.
 
     Returns
     -------
@@ -291,14 +305,14 @@ def read_table(
                 if message:
                     problems.append(Problem(display, message, None, c))
     time_col = fields[0].columns[0]
-    if time_col in values and not any(p.column == time_col for p in problems):
+    if time_ordered and time_col in values and not any(p.column == time_col for p in problems):
         problems += _check_time(values[time_col], display, time_col)
     return (values if not problems else {}), problems, warnings
 
 
 def read_stream(cls: type[S], path: Path, display: str | None = None) -> S:
     """Read one stream file, raising :class:`DiveFormatError` with every problem found."""
-    values, problems, warnings = read_table(path, cls.FIELDS, display)
+    values, problems, warnings = read_table(path, cls.FIELDS, display, time_ordered=cls.TIME_ORDERED)
     for w in warnings:
         log.warning(w)
     if problems:

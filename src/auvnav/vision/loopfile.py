@@ -1,0 +1,151 @@
+"""The loop-closure file ``products/vision/loops.csv`` (DESIGN section 6): one reader, one writer.
+
+Each row is a 6-DOF relative pose between two stereo pairs ``i`` and ``j`` (0-based rows of
+``images/index.csv``, so pose indices in the SLAM graph):
+
+``T_i_j = inv(T_ned_body_i) @ T_ned_body_j``, the pose of body ``j`` expressed in body ``i``:
+``x_m, y_m, z_m`` is the position of j's origin in i's FRD axes, ``roll_deg, pitch_deg, yaw_deg`` the
+Euler ZYX angles of ``R_i_j``. The 21 columns ``cov00 .. cov55`` (upper triangle, row-major, indices
+0..5 = x, y, z, roll, pitch, yaw) are the covariance of that 6-vector in SI units and radians (m^2,
+m rad, rad^2). ``inliers`` counts the feature correspondences that support the estimate.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from auvnav.errors import DiveFormatError, Problem
+from auvnav.frames import euler2rot, rot2euler, se3
+from auvnav.streams import Field, Stream, read_stream, write_stream
+
+DEG = np.pi / 180.0
+_UPPER = [(a, b) for a in range(6) for b in range(a, 6)]
+COV_COLUMNS = tuple(f"cov{a}{b}" for a, b in _UPPER)
+
+
+@dataclass(frozen=True)
+class LoopClosures(Stream):
+    """Relative-pose measurements between stereo pairs.
+
+    Parameters
+    ----------
+    i, j : ndarray of int, shape (N,)
+        Pose (image pair) indices, 0-based.
+    t_i_s, t_j_s : ndarray, shape (N,)
+        Image times, POSIX seconds.
+    t_ij_m : ndarray, shape (N, 3)
+        Position of j in body i, metres, FRD.
+    rpy_ij_rad : ndarray, shape (N, 3)
+        Roll, pitch, yaw of ``R_i_j`` (Euler ZYX), radians.
+    cov_upper : ndarray, shape (N, 21)
+        Upper triangle of the 6x6 covariance of (x, y, z, roll, pitch, yaw), row-major, SI and radians.
+    inliers : ndarray of int, shape (N,)
+    """
+
+    i: NDArray[np.int64]
+    j: NDArray[np.int64]
+    t_i_s: NDArray[np.float64]
+    t_j_s: NDArray[np.float64]
+    t_ij_m: NDArray[np.float64]
+    rpy_ij_rad: NDArray[np.float64]
+    cov_upper: NDArray[np.float64]
+    inliers: NDArray[np.int64]
+    FILE: ClassVar[str] = "products/vision/loops"
+    TIME_ORDERED: ClassVar[bool] = False
+    FIELDS: ClassVar[tuple[Field, ...]] = (
+        Field("i", ("i",), kind="int"),
+        Field("j", ("j",), kind="int"),
+        Field("t_i_s", ("t_i",)),
+        Field("t_j_s", ("t_j",)),
+        Field("t_ij_m", ("x_m", "y_m", "z_m")),
+        Field("rpy_ij_rad", ("roll_deg", "pitch_deg", "yaw_deg"), DEG),
+        Field("cov_upper", COV_COLUMNS),
+        Field("inliers", ("inliers",), kind="int"),
+    )
+
+    @property
+    def covariance(self) -> NDArray[np.float64]:
+        """Full 6x6 covariances, shape (N, 6, 6)."""
+        C = np.zeros((len(self), 6, 6))
+        for k, (a, b) in enumerate(_UPPER):
+            C[:, a, b] = C[:, b, a] = self.cov_upper[:, k]
+        return C
+
+    @property
+    def T_i_j(self) -> NDArray[np.float64]:
+        """Relative poses as 4x4 transforms, shape (N, 4, 4)."""
+        r, p, y = self.rpy_ij_rad.T
+        return se3(euler2rot(y, p, r), self.t_ij_m)
+
+
+def loops_from_transforms(
+    i: NDArray[np.int64],
+    j: NDArray[np.int64],
+    t_i_s: NDArray[np.float64],
+    t_j_s: NDArray[np.float64],
+    T_i_j: NDArray[np.float64],
+    covariance: NDArray[np.float64],
+    inliers: NDArray[np.int64],
+) -> LoopClosures:
+    """Build :class:`LoopClosures` from 4x4 relative poses and 6x6 covariances (x, y, z, r, p, y order)."""
+    yaw, pitch, roll = rot2euler(T_i_j[:, :3, :3])
+    a, b = zip(*_UPPER, strict=True)
+    return LoopClosures(
+        i=np.asarray(i, dtype=np.int64),
+        j=np.asarray(j, dtype=np.int64),
+        t_i_s=np.asarray(t_i_s, dtype=float),
+        t_j_s=np.asarray(t_j_s, dtype=float),
+        t_ij_m=T_i_j[:, :3, 3].copy(),
+        rpy_ij_rad=np.column_stack([roll, pitch, yaw]),
+        cov_upper=covariance[:, list(a), list(b)],
+        inliers=np.asarray(inliers, dtype=np.int64),
+    )
+
+
+def check_loops(loops: LoopClosures, n_poses: int, display: str) -> None:
+    """Raise :class:`DiveFormatError` naming every row whose poses do not exist or whose covariance is
+    not positive definite (rows are 1-based data rows)."""
+    problems: list[Problem] = []
+    for row in np.flatnonzero((loops.i < 0) | (loops.i >= n_poses) | (loops.j < 0) | (loops.j >= n_poses)):
+        problems.append(
+            Problem(
+                display,
+                f"names pose {loops.i[row]} -> {loops.j[row]}; poses are 0..{n_poses - 1}",
+                int(row) + 1,
+            )
+        )
+    for row in np.flatnonzero(loops.i == loops.j):
+        problems.append(Problem(display, f"joins pose {loops.i[row]} to itself", int(row) + 1))
+    eig_min = np.linalg.eigvalsh(loops.covariance)[:, 0]
+    for row in np.flatnonzero(~(eig_min > 0)):
+        problems.append(
+            Problem(
+                display,
+                f"covariance is not positive definite (smallest eigenvalue {eig_min[row]:.3g})",
+                int(row) + 1,
+            )
+        )
+    if problems:
+        raise DiveFormatError(problems)
+
+
+def read_loops(path: Path, *, n_poses: int | None = None) -> LoopClosures:
+    """Read a loop-closure file; every problem is a line naming the file and row.
+
+    With ``n_poses``, also check that every row names existing poses and carries a positive-definite
+    covariance.
+    """
+    loops = read_stream(LoopClosures, Path(path), str(path))
+    if n_poses is not None:
+        check_loops(loops, n_poses, str(path))
+    return loops
+
+
+def write_loops(loops: LoopClosures, path: Path) -> None:
+    """Write a loop-closure file (CSV or Parquet by suffix), atomically."""
+    write_stream(loops, Path(path))
