@@ -133,3 +133,122 @@ def validate(
         gaps = f", {len(s.gaps)} gap(s), longest {max(g[1] for g in s.gaps):.1f} s" if s.gaps else ""
         lines.append(f"  {s.name:<13} {s.file:<24} {s.rows:>8} rows  {s.rate_hz:7.2f} Hz{gaps}")
     emit(summary, "\n".join(lines), as_json=as_json)
+
+
+# ---------------------------------------------------------------------------------------------
+# compass
+# ---------------------------------------------------------------------------------------------
+
+compass_app = typer.Typer(
+    help="Compass: declination, magnetometer calibration, deviation fit.", no_args_is_help=True
+)
+app.add_typer(compass_app, name="compass")
+
+
+def _date2posix(text: str) -> float:
+    """POSIX seconds (UTC) of an ISO date ``YYYY-MM-DD`` or a decimal year such as ``2025.5``."""
+    import datetime as dt
+
+    from auvnav.compass import decimal_year2posix
+
+    try:
+        if "-" in text.lstrip("-"):
+            day = dt.date.fromisoformat(text)
+            return dt.datetime(day.year, day.month, day.day, tzinfo=dt.timezone.utc).timestamp()
+        return decimal_year2posix(float(text))
+    except ValueError as err:
+        raise typer.BadParameter(
+            f"{text!r} is neither an ISO date (YYYY-MM-DD) nor a decimal year", param_hint="DATE"
+        ) from err
+
+
+@compass_app.command(context_settings={"ignore_unknown_options": True})  # negative LAT/LON
+def declination(
+    lat_deg: Annotated[float, typer.Argument(metavar="LAT_DEG", help="Geodetic latitude, degrees north.")],
+    lon_deg: Annotated[float, typer.Argument(metavar="LON_DEG", help="Longitude, degrees east.")],
+    date: Annotated[str, typer.Argument(metavar="DATE", help="ISO date YYYY-MM-DD (UTC) or decimal year.")],
+    height_km: Annotated[
+        float, typer.Option("--height-km", help="Height above the WGS84 ellipsoid, km.")
+    ] = 0.0,
+    as_json: JsonOpt = False,
+    verbose: VerboseOpt = 0,
+    quiet: QuietOpt = False,
+) -> None:
+    """The geomagnetic field at a place and date (WMM, or IGRF outside the WMM years)."""
+    import math
+
+    from auvnav.compass import earth_field, posix2decimal_year
+
+    setup_logging(verbose, quiet)
+    time_s = _date2posix(date)
+    field = earth_field(math.radians(lat_deg), math.radians(lon_deg), time_s, height_m=1e3 * height_km)
+    north, east, down = (field.b_ned_T * 1e9).tolist()
+    d_deg, i_deg = math.degrees(field.declination_rad), math.degrees(field.inclination_rad)
+    summary = {
+        "latitude_deg": lat_deg,
+        "longitude_deg": lon_deg,
+        "height_km": height_km,
+        "decimal_year": posix2decimal_year(time_s),
+        "declination_deg": d_deg,
+        "inclination_deg": i_deg,
+        "north_nT": north,
+        "east_nT": east,
+        "down_nT": down,
+        "horizontal_nT": field.horizontal_T * 1e9,
+        "total_nT": field.total_T * 1e9,
+        "model": field.model,
+    }
+    human = "\n".join(
+        [
+            f"{abs(lat_deg):.4f} {'N' if lat_deg >= 0 else 'S'}, {abs(lon_deg):.4f} "
+            f"{'E' if lon_deg >= 0 else 'W'}, {height_km:g} km, {date} "
+            f"({summary['decimal_year']:.3f}), {field.model}",
+            f"  Declination  {abs(d_deg):9.2f} deg {'E' if d_deg >= 0 else 'W'}",
+            f"  Inclination  {abs(i_deg):9.2f} deg {'down' if i_deg >= 0 else 'up'}",
+            f"  North        {north:9.1f} nT",
+            f"  East         {east:9.1f} nT",
+            f"  Down         {down:9.1f} nT",
+            f"  Horizontal   {summary['horizontal_nT']:9.1f} nT",
+            f"  Total        {summary['total_nT']:9.1f} nT",
+        ]
+    )
+    emit(summary, human, as_json=as_json)
+
+
+# ---------------------------------------------------------------------------------------------
+# navigate, evaluate
+# ---------------------------------------------------------------------------------------------
+
+
+@app.command()
+def navigate(
+    dive: DiveArg,
+    compass_correction: Annotated[
+        Path | None,
+        typer.Option("--compass-correction", help="Compass correction file applied to the heading (eq. 5)."),
+    ] = None,
+    as_json: JsonOpt = False,
+    verbose: VerboseOpt = 0,
+    quiet: QuietOpt = False,
+) -> None:
+    """Dead reckoning, filter and smoother; writes DIVE/products/nav/ (a rerun replaces it)."""
+    from auvnav.nav.products import format_summary, run_navigation
+
+    setup_logging(verbose, quiet)
+    summary = run_navigation(dive, compass_correction=compass_correction)
+    emit(summary, format_summary(summary), as_json=as_json)
+
+
+@app.command()
+def evaluate(
+    dive: DiveArg,
+    as_json: JsonOpt = False,
+    verbose: VerboseOpt = 0,
+    quiet: QuietOpt = False,
+) -> None:
+    """Score a simulated dive's products against its truth (the products that exist)."""
+    from auvnav.evaluate import evaluate_dive, format_scores
+
+    setup_logging(verbose, quiet)
+    result = evaluate_dive(dive)
+    emit(result, format_scores(result), as_json=as_json)

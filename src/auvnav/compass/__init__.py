@@ -1,0 +1,60 @@
+"""Compass: the Earth field and declination, magnetometer heading and calibration, and the
+deviation correction of the paper (eq. 1-6) with its correction file.
+
+- :mod:`~auvnav.compass.field`: geomagnetic field (WMM / IGRF) at a place and date; magnetic <-> true.
+- :mod:`~auvnav.compass.magnetometer`: eq. 1 heading, eq. 2-4 hard/soft-iron forward model,
+  ellipsoid and levelled calibration.
+- :mod:`~auvnav.compass.deviation`: eq. 5 model, eq. 6 (robust) fit, the constant from GPS transits.
+- :mod:`~auvnav.compass.correction`: the ``auvnav-compass-correction/1`` file.
+"""
+
+from auvnav.compass.correction import read_correction, write_correction
+from auvnav.compass.deviation import (
+    DeviationFit,
+    DeviationModel,
+    fit_deviation,
+    fix_constant,
+    fourier_design,
+    heading_gaps,
+)
+from auvnav.compass.field import (
+    EarthField,
+    GeomagneticModelError,
+    decimal_year2posix,
+    earth_field,
+    magnetic2true,
+    posix2decimal_year,
+    true2magnetic,
+)
+from auvnav.compass.magnetometer import (
+    MagnetometerCalibration,
+    calibrate_magnetometer,
+    deviation_from_iron,
+    distort_field,
+    heading_from_magnetometer,
+    level_rotation,
+)
+
+__all__ = [
+    "DeviationFit",
+    "DeviationModel",
+    "EarthField",
+    "GeomagneticModelError",
+    "MagnetometerCalibration",
+    "calibrate_magnetometer",
+    "decimal_year2posix",
+    "deviation_from_iron",
+    "distort_field",
+    "earth_field",
+    "fit_deviation",
+    "fix_constant",
+    "fourier_design",
+    "heading_from_magnetometer",
+    "heading_gaps",
+    "level_rotation",
+    "magnetic2true",
+    "posix2decimal_year",
+    "read_correction",
+    "true2magnetic",
+    "write_correction",
+]
