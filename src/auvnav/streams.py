@@ -155,7 +155,7 @@ class Stream:
             if value is None:
                 continue
             arr = np.asarray(value)
-            arr = arr.reshape(len(arr), -1)
+            arr = arr.reshape(len(arr), len(f.columns))
             for k, c in enumerate(f.columns):
                 col = arr[:, k]
                 data[c] = col / f.scale if f.kind == "float" else col
