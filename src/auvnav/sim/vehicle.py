@@ -75,6 +75,8 @@ class VehicleDynamics:
     vertical_rate_max_mps: float = 0.3
     altitude_gain_per_s: float = 0.4
     altitude_tolerance_m: float = 0.2  # a descent ends within this of the commanded altitude
+    lost_bottom_climb_mps: float = 0.1  # climb while bottom lock is lost close to the seafloor
+    bottom_clearance_m: float = 0.1  # the hull touches the seafloor at this altitude of the DVL
     turn_anticipation_m: float = 1.5  # the next leg starts this far before a leg's end
     waypoint_capture_m: float = 3.0  # a line starts with a leg to its first point beyond this
     draft_m: float = 0.3  # depth of the reference point when floating
@@ -304,6 +306,10 @@ def fly(
     speed = mission.speed_mps
     altitude = mission.altitude_m
     vrate = w_max
+    u_cmd = 0.0
+    last_alt_m = math.inf  # the last altitude the DVL measured: lock lost near the bottom means too close
+    floor_d = math.inf
+    bottom_contacts = 0
 
     k = 0
     completed = False
@@ -348,6 +354,7 @@ def fly(
             alt_meas = alt_true + s_alt * z[10]
             slope_rate = gn * vn + ge * ve
             if alt_ok:
+                last_alt_m = alt_meas
                 dvl_rows.append((t, sx, sy, sz, alt_meas, 1.0))
                 v_ob = (
                     N[0] * sx + N[1] * sy + N[2] * sz,
@@ -356,7 +363,7 @@ def fly(
                 )
             else:
                 dvl_rows.append((t, 0.0, 0.0, 0.0, 0.0, 0.0))
-                v_ob = (0.0, 0.0, 0.0)  # no bottom lock: the vehicle assumes it holds station
+                v_ob = (u_cmd, 0.0, 0.0)  # no bottom lock: speed through water from the thrust command
         if at_surface and k % gps_every == 0:
             an, ae, _ = body2ned(psi, theta, phi, *gps_lever_body_m)
             gps_rows.append((t, n + an + s_gps * z[11], e + ae + s_gps * z[12]))
@@ -423,8 +430,10 @@ def fly(
             w_cmd = 0.0
         elif alt_ok:
             w_cmd = _clamp(slope_rate + dyn.altitude_gain_per_s * (alt_meas - alt_cmd), vrate)
+        elif last_alt_m > 0.5 * alt_max:
+            w_cmd = vrate  # no bottom in sight yet: descend
         else:
-            w_cmd = vrate  # no bottom in sight: descend
+            w_cmd = -dyn.lost_bottom_climb_mps  # lock lost close to the seafloor: back off
 
         # ---- record step k ----
         rec_t.append(t)
@@ -450,6 +459,9 @@ def fly(
         else:
             d += w * dt
             w += (w_cmd - w) * k_vert
+            if d + lz > floor_d - dyn.bottom_clearance_m:  # the seafloor stops the vehicle
+                d, w = floor_d - dyn.bottom_clearance_m - lz, min(w, 0.0)
+                bottom_contacts += 1
             surface_d = -eta(t + dt) + dyn.draft_m
             if d <= surface_d and w < 0.0:
                 d, w, at_surface = surface_d, 0.0, True
@@ -464,6 +476,8 @@ def fly(
             progress(k * dt)
     if not completed:
         log.warning("the mission was cut at %.0f s of vehicle time before its end", max_duration_s)
+    if bottom_contacts:
+        log.warning("the vehicle touched the seafloor in %d time steps", bottom_contacts)
 
     true = np.array(rec_true)
     ob = np.array(rec_ob)
