@@ -211,3 +211,22 @@ def test_missing_required_stream(tmp_path: Path, small_dive) -> None:
     assert [str(p) for p in validate_dive(tmp_path / "d").problems] == [
         "nav/pressure.csv: required stream file missing"
     ]
+
+
+def test_northbound_heading_in_degrees_is_not_mistaken_for_radians() -> None:
+    from auvnav.streams import looks_like_radians
+
+    rng = np.random.default_rng(0)
+    wander = np.cumsum(rng.normal(0, 0.2, 2000))
+    north = np.clip(-2.5 + 3 * wander / np.abs(wander).max() + rng.normal(0, 0.3, 2000), -5.8, 0.5)
+    assert looks_like_radians(north) is None
+    turning = np.degrees(np.angle(np.exp(1j * np.linspace(0, 12, 2000))))  # turning in degrees
+    assert looks_like_radians(turning) is None
+    assert "radians" in (looks_like_radians(np.radians(turning)) or "")
+
+
+def test_products_are_readable_by_others(tmp_path: Path) -> None:
+    from auvnav.streams import atomic_write
+
+    atomic_write(tmp_path / "x.txt", lambda p: p.write_text("x"))
+    assert (tmp_path / "x.txt").stat().st_mode & 0o044 == 0o044

@@ -131,3 +131,10 @@ def test_stacks_broadcast() -> None:
     assert R.shape == (7, 3, 3)
     y2, _, _ = F.rot2euler(R)
     np.testing.assert_allclose(y2, yaw, atol=1e-12)
+
+
+def test_ned2geodetic_shapes_agree() -> None:
+    origin = F.GeodeticOrigin.from_degrees(-14.05, 121.78)
+    for p in (np.zeros(3), np.zeros((1, 3)), np.zeros((4, 3))):
+        lat, lon, h = F.ned2geodetic(p, origin)
+        assert lat.shape == lon.shape == h.shape == p.shape[:-1]

@@ -216,6 +216,81 @@ def declination(
     emit(summary, human, as_json=as_json)
 
 
+@compass_app.command("fit")
+def compass_fit(
+    dives: Annotated[list[Path], typer.Argument(metavar="DIVE", help="Dive folders, pooled.")],
+    reference: Annotated[
+        str,
+        typer.Option(
+            "--reference",
+            help="slam (products/slam/trajectory.csv), truth (a simulated dive's) or a trajectory file.",
+        ),
+    ] = "slam",
+    transits: Annotated[
+        list[Path] | None,
+        typer.Option(
+            "--transits",
+            metavar="DIVE",
+            help="A dive whose GPS course made good fixes the constant; repeat for more (a DIVE may be one).",
+        ),
+    ] = None,
+    harmonics: Annotated[int, typer.Option("--harmonics", min=0, help="Harmonics of eq. 5.")] = 3,
+    max_turn_rate_deg_s: Annotated[
+        float | None,
+        typer.Option("--max-turn-rate-deg-s", min=0.0, help="Pairs only while turning slower [2], deg/s."),
+    ] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out", help="Correction file [DIVE/products/compass/correction.yaml]; a .png beside it."
+        ),
+    ] = None,
+    overwrite: OverwriteOpt = False,
+    as_json: JsonOpt = False,
+    verbose: VerboseOpt = 0,
+    quiet: QuietOpt = False,
+) -> None:
+    """Fit the compass correction (eq. 5-6) against a reference heading; the constant from transits."""
+    from auvnav.compass.fit import format_fit_summary
+    from auvnav.report.compass_figures import run_compass_fit
+
+    setup_logging(verbose, quiet)
+    summary = run_compass_fit(
+        dives,
+        reference=reference,
+        transits=transits or [],
+        harmonics=harmonics,
+        out=out,
+        overwrite=overwrite,
+        max_turn_rate_deg_s=max_turn_rate_deg_s,
+    )
+    emit(summary, format_fit_summary(summary), as_json=as_json)
+
+
+class _CalibrationMethod(str, Enum):
+    levelled = "levelled"
+    ellipsoid = "ellipsoid"
+
+
+@compass_app.command("calibrate")
+def compass_calibrate(
+    dive: DiveArg,
+    method: Annotated[
+        _CalibrationMethod,
+        typer.Option("--method", help="levelled: horizontal fit (a barely tilting spin); ellipsoid: 3D."),
+    ] = _CalibrationMethod.levelled,
+    as_json: JsonOpt = False,
+    verbose: VerboseOpt = 0,
+    quiet: QuietOpt = False,
+) -> None:
+    """Hard- and soft-iron calibration from the dive's raw magnetometer (a spin), with heading scores."""
+    from auvnav.compass.calibrate import calibrate_dive, format_calibration
+
+    setup_logging(verbose, quiet)
+    summary = calibrate_dive(dive, method=method.value)
+    emit(summary, format_calibration(summary), as_json=as_json)
+
+
 # ---------------------------------------------------------------------------------------------
 # navigate, evaluate
 # ---------------------------------------------------------------------------------------------
@@ -243,6 +318,10 @@ def navigate(
 @app.command()
 def evaluate(
     dive: DiveArg,
+    compass_correction: Annotated[
+        Path | None,
+        typer.Option("--compass-correction", help="Score this correction file against the true deviation."),
+    ] = None,
     as_json: JsonOpt = False,
     verbose: VerboseOpt = 0,
     quiet: QuietOpt = False,
@@ -251,7 +330,7 @@ def evaluate(
     from auvnav.evaluate import evaluate_dive, format_scores
 
     setup_logging(verbose, quiet)
-    result = evaluate_dive(dive)
+    result = evaluate_dive(dive, compass_correction=compass_correction)
     emit(result, format_scores(result), as_json=as_json)
 
 
@@ -269,7 +348,7 @@ def depth(
     ] = None,
     atmospheric: Annotated[
         Path | None,
-        typer.Option("--atmospheric", help="Atmospheric pressure series (t, pressure_dbar) for dive.yaml's."),
+        typer.Option("--atmospheric", help="Atmospheric pressure series (t, pressure_dbar) [dive.yaml]."),
     ] = None,
     estimate_tide: Annotated[
         bool, typer.Option("--estimate-tide", help="Estimate the tide from the loop closures alone.")
@@ -488,3 +567,30 @@ def simulate(
         + ("" if summary["completed"] else " (cut before the mission's end)")
     )
     emit(summary, human, as_json=as_json)
+
+
+# ---------------------------------------------------------------------------------------------
+# demo
+# ---------------------------------------------------------------------------------------------
+
+
+@app.command()
+def demo(
+    out: Annotated[Path, typer.Option("--out", help="Folder for the campaign's dives.")] = Path(
+        "demo-output"
+    ),
+    quick: Annotated[
+        bool, typer.Option("--quick", help="Small geometry: a minute instead of several.")
+    ] = False,
+    overwrite: OverwriteOpt = False,
+    as_json: JsonOpt = False,
+    verbose: VerboseOpt = 0,
+    quiet: QuietOpt = False,
+) -> None:
+    """The paper's experiment on a built-in simulated campaign: every stage that exists, measured."""
+    from auvnav.demo import format_demo, run_demo
+
+    setup_logging(verbose, quiet)
+    say = None if (as_json or quiet) else (lambda text: typer.echo(f"... {text}", err=True))
+    summary = run_demo(out, quick=quick, overwrite=overwrite, progress=say)
+    emit(summary, format_demo(summary), as_json=as_json)

@@ -218,4 +218,5 @@ def ned2geodetic(p_ned_m: ArrayLike, origin: GeodeticOrigin) -> tuple[FloatArray
         origin.height_m,
         deg=False,
     )
-    return np.asarray(lat, dtype=float), np.asarray(lon, dtype=float), np.asarray(h, dtype=float)
+    lat, lon, h = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (lat, lon, h)))
+    return lat.copy(), lon.copy(), h.copy()

@@ -28,6 +28,9 @@ log = logging.getLogger(__name__)
 Kind = Literal["float", "int", "bool", "str"]
 S = TypeVar("S", bound="Stream")
 
+_UMASK = os.umask(0o022)
+os.umask(_UMASK)
+
 #: At most this many rows are named for one kind of problem in one column; the rest are counted.
 MAX_ROWS_NAMED = 5
 
@@ -76,17 +79,22 @@ def within(lo: float, hi: float, unit: str, hint: str = "") -> Callable[[np.ndar
 
 
 def looks_like_radians(v: np.ndarray) -> str | None:
-    """Flag a degree column that holds radians: every value within +-2 pi yet spread over > 3 units.
+    """Flag a degree column that holds radians: every value within +-2 pi, and a wrap-around jump.
 
-    A heading in degrees that stays within +-6.3 degrees of north can only spread over a few degrees;
-    a spread of 3 units inside +-2 pi is a vehicle turning through more than 170 degrees in radians.
+    A heading in radians wraps by nearly 2 pi between consecutive samples whenever the vehicle turns
+    through the wrap point (south for (-pi, pi], north for [0, 2 pi)), which every dive with turns does.
+    A wrap jumps by at least 2 pi less one sample's turn (> 6.1 even logged at 1 Hz); degrees that stay
+    within +-6.3 of north (a northbound transect) do not jump by 5.5 between samples.
     """
     finite = v[np.isfinite(v)]
-    if finite.size < 3 or np.abs(finite).max() > 2 * np.pi + 1e-9 or np.ptp(finite) <= 3.0:
+    if finite.size < 3 or np.abs(finite).max() > 2 * np.pi + 1e-9:
+        return None
+    jumps = np.abs(np.diff(finite))
+    if not (jumps > 5.5).any():
         return None
     return (
-        f"values span {finite.min():.3f} to {finite.max():.3f}, all within +-2 pi: "
-        "these are radians, the column declares degrees"
+        f"values span {finite.min():.3f} to {finite.max():.3f}, all within +-2 pi, and wrap by "
+        f"{jumps.max():.3f} between rows: these are radians, the column declares degrees"
     )
 
 
@@ -327,6 +335,7 @@ def atomic_write(path: Path, write: Callable[[Path], None]) -> None:
     os.close(fd)
     try:
         write(Path(tmp))
+        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the file the mode open() would
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
