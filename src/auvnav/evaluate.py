@@ -157,10 +157,23 @@ def _compass(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str,
     return compass_section(dive_path, path) if path.is_file() else None
 
 
+def _slam(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, Any] | None:
+    """The SLAM trajectory's scores; with a deviation estimated in the graph, also that curve's
+    (``deviation_rmse_deg`` as the compass section's, ``deviation_shape_rmse_deg`` without the constant)."""
+    scores = trajectory_section("slam/trajectory.csv")(dive_path, truth, distance_m)
+    estimated = dive_path / "products" / "slam" / "compass_correction.yaml"
+    if scores is not None and estimated.is_file():
+        compass = compass_section(dive_path, estimated)
+        scores["deviation_rmse_deg"] = compass["deviation_rmse_deg"]
+        scores["deviation_shape_rmse_deg"] = compass["shape_rmse_deg"]
+    return scores
+
+
 #: Sections in output order: name -> scorer (returns None when its products are absent).
 SECTIONS: dict[str, Section] = {
     "dr": trajectory_section("nav/dr.csv"),
     "filter": trajectory_section("nav/filter.csv"),
+    "slam": _slam,
     "compass": _compass,
 }
 

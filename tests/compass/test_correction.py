@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from auvnav.compass import fit_deviation, read_correction, write_correction
+from auvnav.compass import FitRecord, fit_deviation, read_correction, write_correction
 from auvnav.errors import ConfigError, OutputExistsError
 from auvnav.frames import wrap_angle
 
@@ -112,4 +112,44 @@ def test_not_a_mapping(tmp_path: Path) -> None:
     path = tmp_path / "c.yaml"
     path.write_text("- 1\n- 2\n")
     with pytest.raises(ConfigError, match="document: expected a mapping"):
+        read_correction(path)
+
+
+def test_record_of_the_fit_and_constant(fit, tmp_path: Path) -> None:
+    """Where the shape and the constant came from is written, and read strictly."""
+    path = tmp_path / "c.yaml"
+    record = FitRecord(
+        reference="slam",
+        dives=("navcheck",),
+        pairs=300,
+        transit_dives=("transit",),
+        transit_legs=4,
+        transit_rms_rad=math.radians(0.1),
+    )
+    write_correction(fit, path, record=record)
+    doc = yaml.safe_load(path.read_text())
+    assert doc["fit"] == {"reference": "slam", "dives": ["navcheck"], "pairs": 300}
+    assert doc["constant"]["legs"] == 4 and doc["constant"]["dives"] == ["transit"]
+    assert doc["constant"]["transit_rms_deg"] == pytest.approx(0.1)
+    assert list(doc)[-1] == "table"
+    assert read_correction(path).coefficients_rad == pytest.approx(fit.model.coefficients_rad)
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda d: d["fit"].update(when=1), "fit.when: unknown key"),
+        (lambda d: d["fit"].pop("pairs"), "fit.pairs: missing"),
+        (lambda d: d["fit"].update(reference=3), "fit.reference: expected a string"),
+        (lambda d: d["fit"].update(dives="navcheck"), "fit.dives: expected a list of names"),
+        (lambda d: d["constant"].update(legs=-1), "constant.legs: expected a non-negative integer"),
+        (lambda d: d["constant"].update(transit_rms_deg="x"), "constant.transit_rms_deg: expected a finite"),
+    ],
+)
+def test_record_is_read_strictly(fit, tmp_path: Path, edit, message: str) -> None:
+    path = tmp_path / "c.yaml"
+    record = FitRecord(reference="truth", dives=("a",), pairs=3, transit_dives=("b",), transit_legs=2)
+    write_correction(fit, path, record=record)
+    _edit(path, edit)
+    with pytest.raises(ConfigError, match=message):
         read_correction(path)

@@ -17,6 +17,7 @@ from auvnav.compass import (
     fix_constant,
     fourier_design,
     heading_gaps,
+    transit_deviation,
 )
 from auvnav.errors import InsufficientDataError
 from auvnav.frames import angle_diff, wrap_angle
@@ -242,3 +243,38 @@ def test_angle_wrap_in_observations(true_deviation) -> None:
     fit = fit_deviation(*_pairs(true_deviation, 0, seed=11, headings=h))
     assert np.max(np.abs(fit.observed_rad)) < math.radians(10.0)
     assert np.all(np.abs(angle_diff(fit.model.correct(h), h)) < math.radians(10.0))
+
+
+def test_fix_constant_along_a_dog_leg(true_deviation) -> None:
+    """A transit that first runs back to its line measures the correction weighted along it.
+
+    Leg 1 runs 16 m west then 300 m east: its steps project on the eastward course with weights
+    -16/284 and 300/284 (they sum to one). Course differences built that way give the constant
+    exactly; taking each leg at its final heading does not.
+    """
+    west, east = math.radians(-90.0), math.radians(90.0)
+    headings = [np.array([west, east]), np.radians([0.0]), np.radians([180.0])]
+    along = [np.array([-16.0, 300.0]) / 284.0, np.ones(1), np.ones(1)]
+    y = np.array([w @ true_deviation(h) for h, w in zip(headings, along, strict=True)])
+    shape = DeviationModel(0.0, true_deviation.a_rad, true_deviation.b_rad)
+    fixed = fix_constant(shape, headings, y, heading_weights=along)
+    assert fixed.a0_rad == pytest.approx(true_deviation.a0_rad, abs=1e-12)
+    np.testing.assert_allclose(transit_deviation(fixed, headings, along), y, atol=1e-12)
+    naive = fix_constant(shape, np.array([east, 0.0, np.pi]), y)
+    # 16/284 of (delta(east) - delta(west)) = -1.6 deg, over three legs: 0.03 deg off.
+    assert abs(naive.a0_rad - true_deviation.a0_rad) > math.radians(0.02)
+    # One heading per transit with unit weight is the plain form.
+    plain = fix_constant(shape, np.radians([10.0, 200.0]), [0.1, 0.2])
+    listed = fix_constant(
+        shape, [np.radians([10.0]), np.radians([200.0])], [0.1, 0.2], heading_weights=[[1.0], [1.0]]
+    )
+    assert listed.a0_rad == pytest.approx(plain.a0_rad, abs=1e-15)
+
+
+def test_fix_constant_checks_heading_weights(true_deviation) -> None:
+    with pytest.raises(ValueError, match="same transits"):
+        fix_constant(true_deviation, [[0.1], [0.2]], [0.0, 0.0], heading_weights=[[1.0]])
+    with pytest.raises(ValueError, match="transit 1: headings and weights must match"):
+        fix_constant(true_deviation, [[0.1], [0.2, 0.3]], [0.0, 0.0], heading_weights=[[1.0], [1.0]])
+    with pytest.raises(ValueError, match="positive sum"):
+        fix_constant(true_deviation, [[0.1], [0.2]], [0.0, 0.0], heading_weights=[[1.0], [0.0]])

@@ -6,9 +6,16 @@ deviation correction of the paper (eq. 1-6) with its correction file.
   ellipsoid and levelled calibration.
 - :mod:`~auvnav.compass.deviation`: eq. 5 model, eq. 6 (robust) fit, the constant from GPS transits.
 - :mod:`~auvnav.compass.correction`: the ``auvnav-compass-correction/1`` file.
+- :mod:`~auvnav.compass.evaluate`: a correction against a simulated dive's true deviation.
+- :mod:`~auvnav.compass.fit`: the fit from dives (heading pairs against SLAM, truth or a trajectory;
+  the constant from GPS course made good on transits), behind ``auvnav compass fit``.
+- :mod:`~auvnav.compass.calibrate`: a dive's magnetometer calibration, ``auvnav compass calibrate``.
+
+``fit`` and ``calibrate`` build on :mod:`auvnav.nav` (which uses this package), so they are imported
+from their modules, not from here.
 """
 
-from auvnav.compass.correction import read_correction, write_correction
+from auvnav.compass.correction import FitRecord, read_correction, write_correction
 from auvnav.compass.deviation import (
     DeviationFit,
     DeviationModel,
@@ -16,7 +23,9 @@ from auvnav.compass.deviation import (
     fix_constant,
     fourier_design,
     heading_gaps,
+    transit_deviation,
 )
+from auvnav.compass.evaluate import compass_section, read_true_deviation
 from auvnav.compass.field import (
     EarthField,
     GeomagneticModelError,
@@ -39,9 +48,11 @@ __all__ = [
     "DeviationFit",
     "DeviationModel",
     "EarthField",
+    "FitRecord",
     "GeomagneticModelError",
     "MagnetometerCalibration",
     "calibrate_magnetometer",
+    "compass_section",
     "decimal_year2posix",
     "deviation_from_iron",
     "distort_field",
@@ -55,6 +66,8 @@ __all__ = [
     "magnetic2true",
     "posix2decimal_year",
     "read_correction",
+    "read_true_deviation",
+    "transit_deviation",
     "true2magnetic",
     "write_correction",
 ]

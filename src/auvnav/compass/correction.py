@@ -9,8 +9,11 @@ firmware::
     a0_deg: 0.81
     a_deg: [1.52, -0.61, 0.29]
     b_deg: [-0.98, 0.41, -0.22]
-    constant: {source: gps-transits, sigma_deg: 0.12}   # how a0 was fixed, its 1-sigma
-    residual_rms_deg: 0.29         # of the fit's inliers; null for a model without a fit
+    constant: {source: gps-transits, sigma_deg: 0.12,   # how a0 was fixed, its 1-sigma;
+               legs: 4, transit_rms_deg: 0.1,           # with transits: the legs used, their
+               dives: [transit]}                        # residual RMS and their dives (optional)
+    fit: {reference: truth, dives: [navcheck], pairs: 1180}   # what the shape was fitted to (optional)
+    residual_rms_deg: 0.29         # of the shape fit's inliers (against its reference); null without a fit
     covariance_deg2: [[...], ...]  # of [a0, a1, b1, ..., aN, bN], deg^2; null when unknown
     gaps_deg: [[150.0, 1.0]]       # compass sectors (clockwise start, end) with no data; null
     table:                         # 360 rows [compass_heading_deg, correction_deg]
@@ -25,6 +28,7 @@ wrong type or size, or a table that disagrees with the coefficients is a
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -47,14 +51,43 @@ _Loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 _Dumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 
 _REQUIRED = ("format", "model", "harmonics", "a0_deg", "a_deg", "b_deg", "constant", "table")
-_OPTIONAL = ("residual_rms_deg", "covariance_deg2", "gaps_deg")
-_CONSTANT_REQUIRED, _CONSTANT_OPTIONAL = ("source",), ("sigma_deg",)
+_OPTIONAL = ("residual_rms_deg", "covariance_deg2", "gaps_deg", "fit")
+_CONSTANT_REQUIRED, _CONSTANT_OPTIONAL = ("source",), ("sigma_deg", "legs", "transit_rms_deg", "dives")
+_FIT_KEYS = ("reference", "dives", "pairs")
 
 _HEADER = """\
 # Compass correction (auvnav). corrected heading = compass heading + correction, where
 # correction(h) = a0 + sum_k a_k cos(k h) + b_k sin(k h) (Jakuba, Pizarro and Williams, eq. 5),
 # h the measured compass heading. Angles in degrees; the table is the same curve at each degree.
 """
+
+
+@dataclass(frozen=True)
+class FitRecord:
+    """Where a correction came from, written with it (the file's optional keys).
+
+    Parameters
+    ----------
+    reference : str or None
+        What the shape was fitted against: ``"truth"``, ``"slam"`` or a trajectory file.
+    dives : tuple of str
+        The dives whose heading pairs were fitted.
+    pairs : int or None
+        Heading pairs used.
+    transit_dives : tuple of str
+        The dives whose GPS course made good fixed the constant.
+    transit_legs : int or None
+        Sub-sea legs used for the constant.
+    transit_rms_rad : float or None
+        RMS of the legs' residuals about the fixed correction, radians.
+    """
+
+    reference: str | None = None
+    dives: tuple[str, ...] = ()
+    pairs: int | None = None
+    transit_dives: tuple[str, ...] = ()
+    transit_legs: int | None = None
+    transit_rms_rad: float | None = None
 
 
 def _table(model: DeviationModel) -> list[list[float]]:
@@ -64,7 +97,11 @@ def _table(model: DeviationModel) -> list[list[float]]:
 
 
 def write_correction(
-    fit_or_model: DeviationFit | DeviationModel, path: str | Path, *, overwrite: bool = False
+    fit_or_model: DeviationFit | DeviationModel,
+    path: str | Path,
+    *,
+    overwrite: bool = False,
+    record: FitRecord | None = None,
 ) -> None:
     """Write a deviation fit or model as an ``auvnav-compass-correction/1`` file.
 
@@ -76,6 +113,8 @@ def write_correction(
         The YAML file to write (parent folders are created).
     overwrite : bool
         Replace an existing file.
+    record : FitRecord, optional
+        Where the fit and its constant came from (the ``fit`` key and the ``constant`` details).
 
     Raises
     ------
@@ -104,8 +143,16 @@ def write_correction(
         "gaps_deg": None
         if fit is None
         else [[math.degrees(s) % 360.0, math.degrees(e) % 360.0] for s, e in fit.gaps],
-        "table": _table(model),
     }
+    if record is not None and record.transit_legs is not None:
+        doc["constant"]["legs"] = record.transit_legs
+        doc["constant"]["transit_rms_deg"] = (
+            None if record.transit_rms_rad is None else math.degrees(record.transit_rms_rad)
+        )
+        doc["constant"]["dives"] = list(record.transit_dives)
+    if record is not None and record.reference is not None:
+        doc["fit"] = {"reference": record.reference, "dives": list(record.dives), "pairs": record.pairs}
+    doc["table"] = _table(model)
     path.parent.mkdir(parents=True, exist_ok=True)
     text = yaml.dump(doc, Dumper=_Dumper, sort_keys=False, default_flow_style=None, width=100)
     path.write_text(_HEADER + text, encoding="utf-8")
@@ -121,6 +168,18 @@ def _numbers(path: Path, key: str, value: Any, n: int) -> np.ndarray:
     if not isinstance(value, list) or len(value) != n:
         raise ConfigError(f"{path}: {key}: expected a list of {n} numbers; found {value!r}")
     return np.array([_number(path, f"{key}[{i}]", v) for i, v in enumerate(value)])
+
+
+def _count(path: Path, key: str, value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ConfigError(f"{path}: {key}: expected a non-negative integer; found {value!r}")
+    return value
+
+
+def _names(path: Path, key: str, value: Any) -> list[str]:
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise ConfigError(f"{path}: {key}: expected a list of names; found {value!r}")
+    return value
 
 
 def _keys(path: Path, where: str, doc: Any, required: tuple[str, ...], optional: tuple[str, ...]) -> None:
@@ -170,9 +229,7 @@ def read_correction(path: str | Path) -> DeviationModel:
         raise ConfigError(f"{path}: format: expected {FORMAT!r}; found {doc['format']!r}")
     if doc["model"] != MODEL:
         raise ConfigError(f"{path}: model: expected {MODEL!r}; found {doc['model']!r}")
-    n = doc["harmonics"]
-    if isinstance(n, bool) or not isinstance(n, int) or n < 0:
-        raise ConfigError(f"{path}: harmonics: expected a non-negative integer; found {n!r}")
+    n = _count(path, "harmonics", doc["harmonics"])
     a0 = _number(path, "a0_deg", doc["a0_deg"])
     a = _numbers(path, "a_deg", doc["a_deg"], n)
     b = _numbers(path, "b_deg", doc["b_deg"], n)
@@ -182,8 +239,20 @@ def read_correction(path: str | Path) -> DeviationModel:
         raise ConfigError(
             f"{path}: constant.source: expected one of {', '.join(CONSTANT_SOURCES)}; found {source!r}"
         )
-    if doc["constant"].get("sigma_deg") is not None:
-        _number(path, "constant.sigma_deg", doc["constant"]["sigma_deg"])
+    for key in ("sigma_deg", "transit_rms_deg"):
+        if doc["constant"].get(key) is not None:
+            _number(path, f"constant.{key}", doc["constant"][key])
+    if "legs" in doc["constant"]:
+        _count(path, "constant.legs", doc["constant"]["legs"])
+    if "dives" in doc["constant"]:
+        _names(path, "constant.dives", doc["constant"]["dives"])
+    if "fit" in doc:
+        _keys(path, "fit", doc["fit"], _FIT_KEYS, ())
+        if not isinstance(doc["fit"]["reference"], str):
+            raise ConfigError(f"{path}: fit.reference: expected a string; found {doc['fit']['reference']!r}")
+        _names(path, "fit.dives", doc["fit"]["dives"])
+        if doc["fit"]["pairs"] is not None:
+            _count(path, "fit.pairs", doc["fit"]["pairs"])
     if doc.get("residual_rms_deg") is not None:
         _number(path, "residual_rms_deg", doc["residual_rms_deg"])
     cov = None

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal, get_args
 
@@ -256,6 +257,18 @@ def _robust_scale(r: FloatArray) -> float:
     return float(MAD_TO_SIGMA * np.median(np.abs(r - np.median(r))))
 
 
+def _lstsq(A: FloatArray, y: FloatArray) -> FloatArray:
+    """Least squares ``min |A x - y|`` through the normal equations (minimum norm if singular).
+
+    ``A`` is tall and thin (at most 2N+1 columns). The small ``p x p`` solve costs microseconds,
+    where LAPACK's factorisation of the tall matrix can take tens of milliseconds when a threaded
+    BLAS competes for busy cores, and the fit solves hundreds of times (robust iterations and
+    cross-validation). Squaring the condition number is harmless for a design whose headings span
+    the rose; where they do not, the fit's band says so.
+    """
+    return np.linalg.lstsq(A.T @ A, A.T @ y, rcond=None)[0]
+
+
 def _solve(A: FloatArray, y: FloatArray, w: FloatArray, *, robust: bool, huber_k: float) -> _Solution:
     """Weighted (and optionally Huber-IRLS) least squares for eq. 6, with the covariance.
 
@@ -266,13 +279,13 @@ def _solve(A: FloatArray, y: FloatArray, w: FloatArray, *, robust: bool, huber_k
     n, p = A.shape
     sw = np.sqrt(w)
     Aw, yw = A * sw[:, None], y * sw
-    x = np.linalg.lstsq(Aw, yw, rcond=None)[0]
+    x = _lstsq(Aw, yw)
     e = yw - Aw @ x
     scale = _robust_scale(e) if robust else 0.0
     if scale > 0.0:
         for _ in range(_IRLS_MAX_ITERATIONS):
             wh = np.sqrt(np.minimum(1.0, huber_k * scale / np.maximum(np.abs(e), np.finfo(float).tiny)))
-            x_new = np.linalg.lstsq(Aw * wh[:, None], yw * wh, rcond=None)[0]
+            x_new = _lstsq(Aw * wh[:, None], yw * wh)
             done = np.max(np.abs(x_new - x)) < _IRLS_TOLERANCE_RAD
             x = x_new
             e = yw - Aw @ x
@@ -345,7 +358,8 @@ def _cross_validate(
 ) -> tuple[dict[int, float], int | None]:
     """K-fold cross-validation of the number of harmonics.
 
-    Samples are assigned to folds in turn. The score is the mean squared held-out error over the
+    Samples are assigned to folds in turn; numbers of harmonics the headings cannot determine (a
+    rank-deficient design) are not tried. The score is the mean squared held-out error over the
     samples the full fit keeps as inliers. Returns the RMS per number of harmonics and the choice
     by the one-standard-error rule (the fewest harmonics whose score is within one standard error
     of the best; Hastie, Tibshirani and Friedman, "The Elements of Statistical Learning", 2nd ed.,
@@ -360,6 +374,8 @@ def _cross_validate(
         if 2 * harmonics + 1 >= train_n:
             break
         A = fourier_design(h, harmonics)
+        if np.linalg.matrix_rank(A) < 2 * harmonics + 1:  # the headings flown cannot determine them
+            break
         errors = np.empty(n)
         for k in range(folds):
             test = fold == k
@@ -506,29 +522,91 @@ def fit_deviation(
     )
 
 
+def _transit_rows(
+    compass_heading_rad: ArrayLike | Sequence[ArrayLike],
+    heading_weights: Sequence[ArrayLike] | None,
+    harmonics: int,
+) -> FloatArray:
+    """The harmonic part of eq. 6's rows for each transit, shape (T, 2N).
+
+    One heading per transit gives its row; headings along each transit with weights give the
+    weighted mean of their rows (weights normalised per transit).
+    """
+    if heading_weights is None:
+        h = np.asarray(compass_heading_rad, dtype=float).reshape(-1)
+        if not np.all(np.isfinite(h)):
+            raise ValueError("transit headings must be finite")
+        return fourier_design(h, harmonics)[:, 1:]
+    headings = list(compass_heading_rad)  # type: ignore[arg-type]
+    if len(headings) != len(heading_weights):
+        raise ValueError(
+            f"headings and heading_weights must list the same transits; found {len(headings)} "
+            f"and {len(heading_weights)}"
+        )
+    rows = []
+    for i, (h_leg, w_leg) in enumerate(zip(headings, heading_weights, strict=True)):
+        h = np.asarray(h_leg, dtype=float).reshape(-1)
+        w = np.asarray(w_leg, dtype=float).reshape(-1)
+        if h.shape != w.shape or h.size == 0:
+            raise ValueError(f"transit {i}: headings and weights must match; found {h.shape} and {w.shape}")
+        if not (np.all(np.isfinite(h)) and np.all(np.isfinite(w))) or w.sum() <= 0:
+            raise ValueError(f"transit {i}: headings and weights must be finite with a positive sum")
+        rows.append((w / w.sum()) @ fourier_design(h, harmonics)[:, 1:])
+    return np.array(rows).reshape(len(rows), 2 * harmonics)
+
+
+def transit_deviation(
+    model: DeviationModel,
+    compass_heading_rad: ArrayLike | Sequence[ArrayLike],
+    heading_weights: Sequence[ArrayLike] | None = None,
+) -> FloatArray:
+    """The correction each transit measures under ``model``, radians, shape (T,).
+
+    ``a0 + s_i`` with ``s_i`` the harmonic part at the transit's heading, or its weighted mean
+    along the transit (see :func:`fix_constant`, which takes the same heading arguments).
+    """
+    return (
+        model.a0_rad
+        + _transit_rows(compass_heading_rad, heading_weights, model.harmonics) @ (model.coefficients_rad[1:])
+    )
+
+
 def fix_constant(
     model: DeviationModel,
-    compass_heading_rad: ArrayLike,
+    compass_heading_rad: ArrayLike | Sequence[ArrayLike],
     cmg_minus_dr_course_rad: ArrayLike,
     weights: ArrayLike | None = None,
+    *,
+    heading_weights: Sequence[ArrayLike] | None = None,
 ) -> DeviationModel:
     """Fix the constant ``a0`` from sub-sea transits, holding the shape (paper sec. III.B, Fig. 5b).
 
     On a transit flown at a steady compass heading ``h_i``, the GPS course made good minus the
     course dead-reckoned with the *uncorrected* compass (in the same north reference, declination
     applied) measures the full correction ``delta(h_i)``. With the harmonics held, the weighted
-    least-squares constant is ``a0 = sum w_i (y_i - s(h_i)) / sum w_i``, ``s`` the harmonic part.
+    least-squares constant is ``a0 = sum w_i (y_i - s_i) / sum w_i``, ``s_i = s(h_i)`` the harmonic
+    part at the transit's heading.
+
+    A transit that is not flown at one heading (a dog-leg to the start of the line, a turn at the
+    surface) measures a weighted mean of the correction along it: to first order in ``delta``, each
+    dead-reckoned step ``dp_j`` turns the course by ``delta(h_j)`` times its projection on the
+    dead-reckoned course ``D``, ``w_j = dp_j . D / |D|^2`` (the ``w_j`` sum to one). Given those
+    headings and weights, ``s_i = sum_j w_j s(h_j)``.
 
     Parameters
     ----------
     model : DeviationModel
         The fitted correction (its constant is replaced).
-    compass_heading_rad : array_like, shape (T,), radians
-        Mean compass heading of each transit.
+    compass_heading_rad : array_like, shape (T,), radians; or a sequence of T arrays
+        Mean compass heading of each transit; with ``heading_weights``, the compass headings along
+        each transit.
     cmg_minus_dr_course_rad : array_like, shape (T,), radians
         GPS course made good minus dead-reckoned course, per transit.
     weights : array_like, shape (T,), optional
-        Relative weights (e.g. transit length); default equal.
+        Relative weights of the transits (e.g. inverse course variances); default equal.
+    heading_weights : sequence of T arrays, optional
+        Weight of each heading along its transit (normalised per transit), e.g. the projections
+        ``w_j`` above.
 
     Returns
     -------
@@ -543,24 +621,23 @@ def fix_constant(
     InsufficientDataError
         Fewer than two transits (one fixes the constant but not its uncertainty).
     """
-    h = np.asarray(compass_heading_rad, dtype=float).reshape(-1)
+    phi = _transit_rows(compass_heading_rad, heading_weights, model.harmonics)
     y = np.asarray(cmg_minus_dr_course_rad, dtype=float).reshape(-1)
-    w = np.ones_like(h) if weights is None else np.asarray(weights, dtype=float).reshape(-1)
-    if not h.shape == y.shape == w.shape:
-        raise ValueError(f"transit arrays must match; found {h.shape}, {y.shape} and {w.shape}")
-    if not (np.all(np.isfinite(h)) and np.all(np.isfinite(y)) and np.all(np.isfinite(w))):
-        raise ValueError("transit headings, course differences and weights must be finite")
+    w = np.ones_like(y) if weights is None else np.asarray(weights, dtype=float).reshape(-1)
+    if not len(phi) == y.size == w.size:
+        raise ValueError(f"transit arrays must match; found {len(phi)}, {y.size} and {w.size}")
+    if not (np.all(np.isfinite(y)) and np.all(np.isfinite(w))):
+        raise ValueError("transit course differences and weights must be finite")
     if np.any(w <= 0):
         raise ValueError("transit weights must be positive")
-    if h.size < 2:
-        raise InsufficientDataError(f"fixing the compass constant needs at least 2 transits; got {h.size}")
-    phi = fourier_design(h, model.harmonics)[:, 1:]
+    if y.size < 2:
+        raise InsufficientDataError(f"fixing the compass constant needs at least 2 transits; got {y.size}")
     shape = phi @ model.coefficients_rad[1:]
     d = wrap_angle(y - shape)
     wn = w / w.sum()
     a0 = float(wn @ d)
     r = wrap_angle(d - a0)
-    var_data = float(wn @ r**2) / (h.size - 1)  # variance of a weighted mean
+    var_data = float(wn @ r**2) / (y.size - 1)  # variance of a weighted mean
     g = wn @ phi  # d a0 / d shape = -g
     p = 2 * model.harmonics + 1
     C_shape = np.zeros((p - 1, p - 1)) if model.covariance is None else model.covariance[1:, 1:]
@@ -572,7 +649,7 @@ def fix_constant(
     cov[0, 1:] = cov[1:, 0] = -C_shape @ g
     log.info(
         "compass constant from %d transits: %.3f +- %.3f deg (transit residual RMS %.3f deg)",
-        h.size,
+        y.size,
         math.degrees(a0),
         math.degrees(math.sqrt(cov[0, 0])),
         math.degrees(math.sqrt(float(np.mean(r**2)))),
