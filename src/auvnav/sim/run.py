@@ -88,7 +88,10 @@ class SimConfig:
     Parameters
     ----------
     seed : int
-        The one seed: seafloor, per-dive sensor errors, noise.
+        The dive's seed: seafloor, per-dive sensor errors (DVL scale factor), noise.
+    vehicle_seed : int
+        The vehicle's seed: errors that belong to the vehicle, not the dive (the DVL's mounting
+        misalignment), shared by every dive of a campaign flown with the same vehicle.
     latitude_rad, longitude_rad : float
         Site (the dive's origin), radians.
     start_time_s : float
@@ -118,6 +121,7 @@ class SimConfig:
     """
 
     seed: int = 0
+    vehicle_seed: int = 0
     latitude_rad: float = SCOTT_REEF_LATITUDE_DEG * DEG
     longitude_rad: float = SCOTT_REEF_LONGITUDE_DEG * DEG
     start_time_s: float = field(default_factory=lambda: _posix(DEFAULT_START_TIME))
@@ -190,11 +194,12 @@ class Simulation:
 
 
 def _per_dive_errors(
-    rng: np.random.Generator, sensors: SensorModels, vehicle: Vehicle
+    rng: np.random.Generator, rng_vehicle: np.random.Generator, sensors: SensorModels, vehicle: Vehicle
 ) -> tuple[PerDiveErrors, np.ndarray]:
-    """DVL scale factor and mounting misalignment drawn once per dive."""
+    """DVL scale factor drawn per dive (it follows the dive's sound speed) and mounting misalignment
+    drawn per vehicle (the DVL stays bolted where it is between dives)."""
     scale = sensors.dvl_scale_sigma * float(rng.standard_normal())
-    rpy = sensors.dvl_misalignment_sigma_rad * rng.standard_normal(3)
+    rpy = sensors.dvl_misalignment_sigma_rad * rng_vehicle.standard_normal(3)
     R_body_sensor_nominal = vehicle.dvl.R_body_sensor
     R_body_sensor_true = R_body_sensor_nominal @ euler2rot(rpy[2], rpy[1], rpy[0])
     return PerDiveErrors(scale, R_body_sensor_true.T, R_body_sensor_nominal), rpy
@@ -266,6 +271,7 @@ def _truth_dict(
         {
             "format": "auvnav-truth/1",
             "seed": config.seed,
+            "vehicle_seed": config.vehicle_seed,
             "site": {
                 "latitude_deg": math.degrees(config.latitude_rad),
                 "longitude_deg": math.degrees(config.longitude_rad),
@@ -340,7 +346,8 @@ def simulate(
         sensors = sensors.without_errors()
     seeds = np.random.SeedSequence(config.seed).spawn(4)
     rng_dive, rng_loop, rng_pressure, rng_usbl = (np.random.default_rng(s) for s in seeds)
-    errors, misalignment_rpy = _per_dive_errors(rng_dive, sensors, config.vehicle)
+    rng_vehicle = np.random.default_rng(np.random.SeedSequence([config.vehicle_seed, 0x7E41C1E]))
+    errors, misalignment_rpy = _per_dive_errors(rng_dive, rng_vehicle, sensors, config.vehicle)
     seafloor = Seafloor(config.seed, config.seafloor)
 
     expected_s = mission.planned_duration_s(
@@ -510,6 +517,7 @@ def run_scenario(
     out: Path,
     *,
     seed: int = 0,
+    vehicle_seed: int = 0,
     deviation: Literal["none", "default"] = "default",
     tide: Literal["none", "default"] = "default",
     sensor_errors: Literal["none", "default"] = "default",
@@ -531,6 +539,8 @@ def run_scenario(
         The dive folder to write.
     seed, deviation, tide, sensor_errors
         As :func:`default_config`.
+    vehicle_seed : int
+        As :class:`SimConfig`: the same vehicle (same DVL mounting) for every dive that shares it.
     compass_correction : Path, optional
         A correction file the vehicle applies in real time.
     geometry : dict, optional
@@ -564,6 +574,7 @@ def run_scenario(
     correction = None if compass_correction is None else read_correction(compass_correction)
     config = default_config(
         seed=seed,
+        vehicle_seed=vehicle_seed,
         deviation=deviation,
         tide=tide,
         sensor_errors=sensor_errors,
