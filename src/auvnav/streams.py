@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from auvnav.errors import DiveFormatError, Problem
+from auvnav.errors import DiveFormatError, OutputExistsError, Problem
 
 log = logging.getLogger(__name__)
 
@@ -326,6 +326,14 @@ def read_stream(cls: type[S], path: Path, display: str | None = None) -> S:
     if problems:
         raise DiveFormatError(problems)
     return cls.from_columns(values)
+
+
+def ensure_writable(path: Path, *, overwrite: bool) -> Path:
+    """Check an output path before any work: an existing file is an error unless ``overwrite``."""
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise OutputExistsError(f"{path}: exists (use --overwrite to replace it)")
+    return path
 
 
 def atomic_write(path: Path, write: Callable[[Path], None]) -> None:
