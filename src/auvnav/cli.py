@@ -316,6 +316,46 @@ def navigate(
 
 
 @app.command()
+def loops(
+    dive: DiveArg,
+    feature_scale: Annotated[
+        float | None,
+        typer.Option(
+            "--feature-scale", help="Resize factor for SIFT (default: to 680 px wide, half of 1360)."
+        ),
+    ] = None,
+    workers: Annotated[int | None, typer.Option("--workers", help="Processes (default: every core).")] = None,
+    as_json: JsonOpt = False,
+    verbose: VerboseOpt = 0,
+    quiet: QuietOpt = False,
+) -> None:
+    """Stereo features, loop-closure candidates from the navigation, verification; writes DIVE/products/vision/."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from auvnav.vision.features import FeatureSettings
+    from auvnav.vision.loops import LoopSettings, format_loop_summary, run_loop_stage
+
+    setup_logging(verbose, quiet)
+    if feature_scale is not None and not 0 < feature_scale <= 1:
+        raise typer.BadParameter("must be in (0, 1]", param_hint="--feature-scale")
+    settings = LoopSettings(features=FeatureSettings(scale=feature_scale))
+    if as_json or quiet:
+        summary = run_loop_stage(dive, settings=settings, workers=workers)
+    else:
+        columns = (TextColumn("{task.description:9}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+        with Progress(*columns, transient=True) as bar:
+            tasks: dict[str, Any] = {}
+
+            def progress(stage: str, done: int, total: int) -> None:
+                if stage not in tasks:
+                    tasks[stage] = bar.add_task(stage, total=total)
+                bar.update(tasks[stage], completed=done, total=total)
+
+            summary = run_loop_stage(dive, settings=settings, workers=workers, progress=progress)
+    emit(summary, format_loop_summary(summary), as_json=as_json)
+
+
+@app.command()
 def evaluate(
     dive: DiveArg,
     compass_correction: Annotated[
@@ -482,7 +522,12 @@ def simulate(
         str, typer.Argument(metavar="SCENARIO", help="navcheck | survey | transit | spin | MISSION.yaml")
     ],
     out: Annotated[Path, typer.Option("--out", help="The dive folder to write.")],
-    seed: Annotated[int, typer.Option("--seed", help="Seed of everything random.")] = 0,
+    seed: Annotated[
+        int, typer.Option("--seed", help="The dive's seed: seafloor, noise, per-dive errors.")
+    ] = 0,
+    vehicle_seed: Annotated[
+        int, typer.Option("--vehicle-seed", help="The vehicle's seed: its DVL mounting, shared across dives.")
+    ] = 0,
     deviation: Annotated[
         _Switch, typer.Option("--deviation", help="Compass hard/soft-iron deviation.")
     ] = _Switch.default,
@@ -508,6 +553,21 @@ def simulate(
         float | None, typer.Option("--duration-s", help="Cut the dive after this much vehicle time, s.")
     ] = None,
     usbl: Annotated[bool, typer.Option("--usbl", help="Also simulate USBL fixes.")] = False,
+    images: Annotated[
+        bool, typer.Option("--images/--no-images", help="Render the stereo camera's images.")
+    ] = True,
+    image_scale: Annotated[
+        float, typer.Option("--image-scale", help="Image size relative to 1360 x 1024.")
+    ] = 1.0,
+    image_rate_hz: Annotated[float, typer.Option("--image-rate-hz", help="Camera trigger rate, Hz.")] = 1.0,
+    truth_loops: Annotated[
+        bool,
+        typer.Option("--truth-loops", help="Write truth/loops.csv: loop closures from the truth."),
+    ] = False,
+    false_loops: Annotated[
+        float,
+        typer.Option("--false-loops", min=0.0, max=0.99, help="Fraction of truth loops that are false."),
+    ] = 0.0,
     overwrite: OverwriteOpt = False,
     as_json: JsonOpt = False,
     verbose: VerboseOpt = 0,
@@ -533,6 +593,7 @@ def simulate(
     }
     options = {
         "seed": seed,
+        "vehicle_seed": vehicle_seed,
         "deviation": deviation.value,
         "tide": tide.value,
         "sensor_errors": sensor_errors.value,
@@ -541,6 +602,9 @@ def simulate(
         "max_duration_s": duration_s,
         "usbl": usbl,
         "overwrite": overwrite,
+        "truth_loops": truth_loops,
+        "false_loops": false_loops,
+        "image_rate_hz": image_rate_hz,
     }
     if as_json or quiet:
         summary = run_scenario(scenario, out, **options)
@@ -559,6 +623,8 @@ def simulate(
                 bar.update(task, completed=done, description=f"{elapsed_s / 3600:.2f} h of vehicle time")
 
             summary = run_scenario(scenario, out, progress=progress, **options)
+    if images:
+        summary["images"] = _render_images(out, image_scale, image_rate_hz, seed, as_json or quiet)
     end = summary["end_error_m"]
     human = (
         f"{out}: {summary['mission']} dive, {summary['duration_s'] / 3600:.2f} h, "
@@ -566,7 +632,30 @@ def simulate(
         + ("" if end is None else f"; onboard minus true at the last surfacing {end:.2f} m")
         + ("" if summary["completed"] else " (cut before the mission's end)")
     )
+    if truth_loops:
+        n = summary["truth_loops"]
+        human += f"\ntruth loops: {n['loops']} ({n['consecutive']} consecutive), {n['false']} false"
     emit(summary, human, as_json=as_json)
+
+
+def _render_images(out: Path, scale: float, rate_hz: float, seed: int, silent: bool) -> int:
+    """Render a simulated dive's stereo images (with a progress bar unless silent); the pair count."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from auvnav.sim.camera import render_dive_images
+
+    if not 0 < scale <= 4 or rate_hz <= 0:
+        raise typer.BadParameter("--image-scale must be in (0, 4] and --image-rate-hz positive")
+    if silent:
+        return len(render_dive_images(out, scale=scale, rate_hz=rate_hz, seed=seed))
+    columns = (TextColumn("rendering"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    with Progress(*columns, transient=True) as bar:
+        task = bar.add_task("", total=None)
+
+        def progress(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        return len(render_dive_images(out, scale=scale, rate_hz=rate_hz, seed=seed, progress=progress))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -594,3 +683,139 @@ def demo(
     say = None if (as_json or quiet) else (lambda text: typer.echo(f"... {text}", err=True))
     summary = run_demo(out, quick=quick, overwrite=overwrite, progress=say)
     emit(summary, format_demo(summary), as_json=as_json)
+
+
+# ---------------------------------------------------------------------------------------------
+# graph
+# ---------------------------------------------------------------------------------------------
+
+graph_app = typer.Typer(
+    help="Pose-graph files (g2o, TORO): optimise any 2D or 3D graph.", no_args_is_help=True
+)
+app.add_typer(graph_app, name="graph")
+
+
+class _RobustKernel(str, Enum):
+    none = "none"
+    huber = "huber"
+    cauchy = "cauchy"
+
+
+class _InitialGuess(str, Enum):
+    file = "file"
+    chordal = "chordal"
+
+
+@graph_app.command("optimize")
+def graph_optimize(
+    graph_file: Annotated[
+        Path, typer.Argument(metavar="IN", help="A g2o or TORO pose-graph file, 2D or 3D.")
+    ],
+    out: Annotated[Path, typer.Option("--out", help="The optimised graph, g2o.")],
+    robust: Annotated[
+        _RobustKernel, typer.Option("--robust", help="Kernel on loop closures; lists those it rejects.")
+    ] = _RobustKernel.none,
+    initial: Annotated[
+        _InitialGuess,
+        typer.Option("--initial", help="Initial guess: the file's vertices or a chordal relaxation."),
+    ] = _InitialGuess.file,
+    overwrite: OverwriteOpt = False,
+    as_json: JsonOpt = False,
+    verbose: VerboseOpt = 0,
+    quiet: QuietOpt = False,
+) -> None:
+    """Optimise a pose graph (Levenberg-Marquardt); print its chi-square cost before and after."""
+    from auvnav.slam.g2o import read_g2o, write_g2o
+    from auvnav.slam.solve import optimize_batch
+    from auvnav.streams import ensure_writable
+
+    setup_logging(verbose, quiet)
+    ensure_writable(out, overwrite=overwrite)
+    result = optimize_batch(read_g2o(graph_file), robust=robust.value, initial=initial.value)
+    write_g2o(result.graph, out, overwrite=overwrite)
+    summary = {**result.summary(), "output": str(out)}
+    graph = result.graph
+    lines = [
+        f"{graph_file}: {graph.dim}D, {graph.n_poses} poses, {graph.n_edges} edges",
+        f"  cost before  {result.cost_before:.10g}",
+        f"  cost after   {result.cost_after:.10g}",
+        f"  {result.iterations} iterations, {result.seconds:.2f} s",
+    ]
+    if result.robust != "none":
+        n_loops = int((~graph.is_odometry).sum())
+        lines.append(f"  {result.robust} kernel rejects {len(result.rejected)} of {n_loops} loop closures")
+    lines.append(f"wrote {out}")
+    emit(summary, "\n".join(lines), as_json=as_json)
+
+
+# ---------------------------------------------------------------------------------------------
+# slam
+# ---------------------------------------------------------------------------------------------
+
+
+@app.command()
+def slam(
+    dive: DiveArg,
+    loops: Annotated[
+        Path | None,
+        typer.Option(
+            "--loops",
+            help="Loop-closure file [DIVE/products/vision/loops.csv]; pose i is row i of the image times.",
+        ),
+    ] = None,
+    compass_correction: Annotated[
+        Path | None,
+        typer.Option("--compass-correction", help="Compass correction file applied to the heading (eq. 5)."),
+    ] = None,
+    estimate_compass: Annotated[
+        bool,
+        typer.Option(
+            "--estimate-compass",
+            help="Estimate the deviation (eq. 5) in the graph; writes products/slam/compass_correction.yaml.",
+        ),
+    ] = False,
+    incremental: Annotated[
+        bool, typer.Option("--incremental", help="iSAM2 pose by pose instead of batch Levenberg-Marquardt.")
+    ] = False,
+    tide: Annotated[
+        Path | None,
+        typer.Option("--tide", help="Tide constituent file: the depth becomes depth below the datum."),
+    ] = None,
+    compass_sigma_deg: Annotated[
+        float | None,
+        typer.Option(
+            "--compass-sigma-deg",
+            help="Heading sigma of the compass factors, deg [raw 10x the vehicle's; else 1x].",
+        ),
+    ] = None,
+    harmonics: Annotated[
+        int, typer.Option("--harmonics", min=0, help="Harmonics of the estimated deviation.")
+    ] = 3,
+    robust: Annotated[
+        _RobustKernel, typer.Option("--robust", help="Kernel on loop closures; lists those it rejects.")
+    ] = _RobustKernel.cauchy,
+    marginal_every: Annotated[
+        int,
+        typer.Option("--marginal-every", min=0, help="Marginals of every Nth stereo pair (0: none)."),
+    ] = 1,
+    as_json: JsonOpt = False,
+    verbose: VerboseOpt = 0,
+    quiet: QuietOpt = False,
+) -> None:
+    """SLAM pose graph (GTSAM): DVL, attitude, depth, compass, fixes, loops; writes DIVE/products/slam/."""
+    from auvnav.slam.products import format_summary, run_slam
+
+    setup_logging(verbose, quiet)
+    summary = run_slam(
+        dive,
+        loops=loops,
+        compass_correction=compass_correction,
+        estimate_compass=estimate_compass,
+        incremental=incremental,
+        tide=tide,
+        compass_sigma_deg=compass_sigma_deg,
+        harmonics=harmonics,
+        robust=robust.value,
+        marginal_every=marginal_every,
+    )
+    emit(summary, format_summary(summary), as_json=as_json)

@@ -221,7 +221,19 @@ def test_same_seed_same_bytes(tmp_path: Path) -> None:
 
 def test_simulate_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "dive"
-    args = ["simulate", "survey", "--out", str(out), "--width-m", "4", "--height-m", "1", "--lead-in-m", "2"]
+    args = [
+        "simulate",
+        "survey",
+        "--out",
+        str(out),
+        "--width-m",
+        "4",
+        "--height-m",
+        "1",
+        "--lead-in-m",
+        "2",
+        "--no-images",
+    ]
     assert main([*args, "--seed", "3", "--tide", "none", "--usbl", "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["completed"] and summary["end_error_m"] < 10.0

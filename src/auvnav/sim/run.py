@@ -65,6 +65,7 @@ from auvnav.sim.sensors import (
     deviation_table,
     iron_rows,
 )
+from auvnav.sim.truthloops import write_truth_loops
 from auvnav.sim.vehicle import LoopRecord, PerDiveErrors, Table, VehicleDynamics, fly
 from auvnav.streams import write_table
 from auvnav.trajectory import Trajectory, write_trajectory
@@ -527,6 +528,9 @@ def run_scenario(
     usbl: bool = False,
     overwrite: bool = False,
     progress: Callable[[float, float], None] | None = None,
+    truth_loops: bool = False,
+    false_loops: float = 0.0,
+    image_rate_hz: float = 1.0,
 ) -> dict[str, Any]:
     """``auvnav simulate``: a generated mission (``navcheck|survey|transit|spin``) or a mission file,
     simulated and written as a dive folder; returns the summary.
@@ -551,14 +555,23 @@ def run_scenario(
     overwrite : bool
     progress : callable, optional
         As :func:`simulate`.
+    truth_loops : bool
+        Also write loop closures from the truth (:func:`auvnav.sim.truthloops.write_truth_loops`).
+    false_loops : float
+        Fraction of them that are false, in [0, 1) (needs ``truth_loops``).
+    image_rate_hz : float
+        Camera trigger rate of the truth loops' image times when no images are rendered.
 
     Raises
     ------
     OutputExistsError
         ``out`` exists and ``overwrite`` is False (checked before simulating).
     ConfigError
-        A bad mission file, a bad correction file, or geometry options a mission does not take.
+        A bad mission file, a bad correction file, geometry options a mission does not take, or
+        false loops without truth loops.
     """
+    if false_loops and not truth_loops:
+        raise ConfigError("--false-loops needs --truth-loops")
     given = {k: v for k, v in (geometry or {}).items() if v is not None}
     if Path(out).exists() and not overwrite:
         raise OutputExistsError(f"{out}: exists (use --overwrite to replace it)")
@@ -584,4 +597,9 @@ def run_scenario(
     )
     sim = simulate(mission, config, progress=progress)
     write_simulation(sim, Path(out), overwrite=overwrite)
-    return {"dive": str(out), "seed": seed, **sim.summary}
+    summary = {"dive": str(out), "seed": seed, **sim.summary}
+    if truth_loops:
+        summary["truth_loops"] = write_truth_loops(
+            Path(out), false_fraction=false_loops, seed=seed, rate_hz=image_rate_hz
+        )
+    return summary

@@ -1,0 +1,144 @@
+"""Vision benchmark: the issue-6 acceptance on the simulated navigation check dive, and speeds.
+
+Steps (simulation, rendering and navigation are skipped when their outputs already exist in
+``--work``, so a rerun resumes):
+
+1. ``auvnav simulate navcheck`` (seed 0), images rendered at ``--image-scale`` (0.5 by default): the
+   rendering speed, pairs per second with every core;
+2. ``auvnav navigate`` (the prior for the candidates);
+3. the loop stage with default settings (the feature cache is kept: a rerun does no work twice) and
+   ``evaluate``'s ``loops`` section: recall, precision, median errors, mean Mahalanobis distance (6 for
+   honest covariances), candidates tested against true overlaps;
+4. throughput from an empty feature cache, end to end (illumination correction, features, stereo,
+   candidates, verification), on a ``--speed-seconds`` cut of the same dive at half and at full scale;
+   peak memory.
+
+Usage: ``.venv/bin/python benchmarks/bench_vision.py [--work DIR] [--image-scale 0.5]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+AUVNAV = [str(Path(sys.executable).with_name("auvnav"))]
+
+TARGETS = {
+    "translation_error_median_m": ("<=", 0.01),
+    "rotation_error_median_deg": ("<=", 0.1),
+    "recall": (">=", 0.9),
+    "precision": (">=", 0.99),
+    "candidates_per_true_overlap": ("<=", 3.0),
+}
+
+
+def run(args: list[str]) -> None:
+    print("$", " ".join(str(a) for a in args), flush=True)
+    subprocess.run([str(a) for a in args], check=True, cwd=ROOT)
+
+
+def render(dive: Path, scale: float, seconds: float | None) -> dict[str, float]:
+    """Simulate and render a dive (when absent); the rendering speed."""
+    from auvnav.sim.camera import render_dive_images
+
+    if not (dive / "truth").is_dir():
+        extra = [] if seconds is None else ["--duration-s", str(seconds)]
+        run([*AUVNAV, "simulate", "navcheck", "--out", dive, "--seed", "0", "--json", *extra])
+    index = dive / "images" / "index.csv"
+    if index.is_file():
+        return {}
+    started = time.perf_counter()
+    images = render_dive_images(dive, scale=scale)
+    elapsed = time.perf_counter() - started
+    return {"rendered_pairs": len(images), "render_s": elapsed, "render_pairs_per_s": len(images) / elapsed}
+
+
+def loops(dive: Path, *, fresh: bool) -> dict[str, float]:
+    """Navigate (when needed), run the loop stage (from an empty cache when ``fresh``), evaluate."""
+    from auvnav.evaluate import read_truth
+    from auvnav.vision.evaluate import loops_section
+    from auvnav.vision.loops import run_loop_stage
+
+    if not (dive / "products" / "nav" / "filter.csv").is_file():
+        run([*AUVNAV, "navigate", dive, "--json"])
+    if fresh:
+        shutil.rmtree(dive / "products" / "vision", ignore_errors=True)
+    last = [0.0]
+
+    def progress(stage: str, done: int, total: int) -> None:
+        now = time.perf_counter()
+        if now - last[0] > 30 or done == total:
+            print(f"  {stage} {done}/{total}", flush=True)
+            last[0] = now
+
+    summary = run_loop_stage(dive, progress=progress)
+    truth = read_truth(dive)
+    scores = loops_section(dive, truth, truth.distance_m()) or {}
+    keep = (
+        "pairs_with_features",
+        "features_median",
+        "candidates_tested",
+        "rounds",
+        "features_s",
+        "elapsed_s",
+    )
+    return {
+        **{k: summary[k] for k in keep},
+        "pairs_per_s": summary["pairs_per_s"],
+        "rejected": summary["rejected"],
+        **scores,
+    }
+
+
+def peak_memory_mib() -> float:
+    """Largest resident set of this process or any worker it waited for, MiB (Linux: kB units)."""
+    own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    return max(own, children) / 1024
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--work", type=Path, default=Path("/tmp/auvnav-bench-vision"))
+    parser.add_argument("--image-scale", type=float, default=0.5)
+    parser.add_argument("--speed-seconds", type=float, default=400.0)
+    args = parser.parse_args()
+    args.work.mkdir(parents=True, exist_ok=True)
+    print(f"cores {os.cpu_count()}, load average {os.getloadavg()}", flush=True)
+
+    dive = args.work / "navcheck"
+    results: dict[str, object] = {"image_scale": args.image_scale, "load_average": os.getloadavg()}
+    results.update(render(dive, args.image_scale, None))
+    results["half"] = loops(dive, fresh=False)
+    for name, scale in (("speed_half", args.image_scale), ("speed_full", 1.0)):
+        cut = args.work / f"navcheck-{args.speed_seconds:.0f}s-x{scale:g}"
+        results[f"{name}_render"] = render(cut, scale, args.speed_seconds)
+        results[name] = loops(cut, fresh=True)
+    results["peak_memory_mib"] = peak_memory_mib()
+    results["load_average_end"] = os.getloadavg()
+    (args.work / "results.json").write_text(json.dumps(results, indent=2, default=float), encoding="utf-8")
+    print(json.dumps(results, indent=2, default=float))
+    half = results["half"]
+    assert isinstance(half, dict)
+    print("\nacceptance (half-scale images, default settings):")
+    for key, (op, target) in TARGETS.items():
+        value = half.get(key, float("nan"))
+        ok = value <= target if op == "<=" else value >= target
+        print(f"  {key:32s} {value:10.4g}  target {op} {target:<6g} {'ok' if ok else 'MISSED'}")
+    print(f"  {'mahalanobis_mean (about 6)':32s} {half.get('mahalanobis_mean', float('nan')):10.4g}")
+    for name in ("speed_half", "speed_full"):
+        speed = results[name]
+        assert isinstance(speed, dict)
+        print(f"  {name + ' pairs/s (target >= 8 at half)':32s} {speed['pairs_per_s']:10.4g}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,238 @@
+"""Image front end: illumination correction and SIFT features at a configurable scale.
+
+Strobe images are bright in the middle and dark at the corners, and brighter at low altitude; the paper
+names lighting correction as the slow step of the pipeline (section III). Here it is a division by the
+image's own low-pass: the image is reduced 16 times (area averaging), blurred, enlarged again, and the
+image divided by it. That costs about as much as one resize of the image, and leaves the albedo: the
+strobe's falloff, vignetting and exposure changes are all smooth and multiplicative.
+
+SIFT (Lowe 2004, IJCV 60(2)) runs on images reduced by ``FeatureSettings.scale``; by default to 680 pixels
+wide, half the width of the paper's 1360 x 1024 cameras, as the paper's group did (so full-size images are
+halved and images already rendered at half size are used as they are). Keypoints are returned in the
+pixel coordinates of the image file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+LOWPASS_REDUCTION = 16  # the low-pass image is computed 16 times smaller in each direction
+LOWPASS_SIGMA = 1.5  # Gaussian blur of the reduced image, reduced pixels (~ 24 full pixels)
+# Half the width of the Sirius cameras (1360 px; sim/camera.py cites the source): the default SIFT scale.
+DEFAULT_FEATURE_WIDTH_PX = 680
+
+
+@dataclass(frozen=True)
+class FeatureSettings:
+    """How features are found, matched across the stereo pair and triangulated.
+
+    Parameters
+    ----------
+    scale : float or None
+        SIFT runs on images resized by this factor (0 < scale <= 1); None: to
+        ``DEFAULT_FEATURE_WIDTH_PX`` wide (never enlarged).
+    max_features : int
+        Keypoints kept per image, strongest first.
+    contrast_threshold : float
+        SIFT's contrast threshold (OpenCV ``contrastThreshold``), on illumination-corrected images.
+    sigma_px : float
+        1-sigma keypoint position noise, pixels of the image SIFT runs on (0.4 px, a usual figure for SIFT).
+    stereo_gate_px : float
+        Largest difference of rectified rows between the left and right feature of a stereo match.
+    ratio : float
+        Lowe's ratio test: best descriptor distance below ``ratio`` times the second best.
+    min_range_m, max_range_m : float
+        Plausible distances of the seafloor from the camera; bound the disparity search.
+    """
+
+    scale: float | None = None
+    max_features: int = 4000
+    contrast_threshold: float = 0.02
+    sigma_px: float = 0.4
+    stereo_gate_px: float = 2.0
+    ratio: float = 0.8
+    min_range_m: float = 0.5
+    max_range_m: float = 12.0
+
+    def __post_init__(self) -> None:
+        if self.scale is not None and not 0 < self.scale <= 1:
+            raise ValueError(f"scale must be in (0, 1]; found {self.scale}")
+        if self.sigma_px <= 0 or self.stereo_gate_px <= 0 or not 0 < self.ratio <= 1:
+            raise ValueError("sigma_px and stereo_gate_px must be positive, ratio in (0, 1]")
+        if not 0 < self.min_range_m < self.max_range_m:
+            raise ValueError(
+                f"need 0 < min_range_m < max_range_m; found {self.min_range_m}, {self.max_range_m}"
+            )
+
+    def scale_for(self, width_px: int) -> float:
+        """The resize factor for images ``width_px`` wide."""
+        if self.scale is not None:
+            return self.scale
+        return min(1.0, DEFAULT_FEATURE_WIDTH_PX / width_px)
+
+    def key(self) -> str:
+        """A stable text form for cache keys."""
+        return repr(sorted(asdict(self).items()))
+
+
+@dataclass(frozen=True)
+class Keypoints:
+    """SIFT keypoints of one image.
+
+    Parameters
+    ----------
+    uv_px : ndarray, shape (N, 2)
+        Position (column, row) in the full image's pixels, pixel centres at integers.
+    size_px : ndarray, shape (N,)
+        Keypoint diameter, full-image pixels.
+    descriptors : ndarray, shape (N, 128), uint8
+    """
+
+    uv_px: FloatArray
+    size_px: FloatArray
+    descriptors: NDArray[np.uint8]
+
+
+def correct_illumination(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """Divide a grey image by its own low-pass (strobe falloff, vignetting, exposure) and rescale to 8 bits.
+
+    The result has a mean of about 128 wherever the scene has texture, whatever the lighting.
+    """
+    h, w = image.shape[:2]
+    small = cv2.resize(
+        image,
+        (max(1, w // LOWPASS_REDUCTION), max(1, h // LOWPASS_REDUCTION)),
+        interpolation=cv2.INTER_AREA,
+    ).astype(np.float32)
+    small = cv2.GaussianBlur(small, (0, 0), LOWPASS_SIGMA, borderType=cv2.BORDER_REFLECT)
+    low = cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
+    out = image.astype(np.float32) * (128.0 / np.maximum(low, 1.0))
+    return np.clip(out, 0, 255).astype(np.uint8)
+
+
+_SIFT: dict[tuple, cv2.SIFT] = {}
+
+
+def _sift(settings: FeatureSettings) -> cv2.SIFT:
+    key = (settings.max_features, settings.contrast_threshold)
+    if key not in _SIFT:
+        # nOctaveLayers 3, edgeThreshold 10 and sigma 1.6 are the defaults of Lowe and OpenCV; precise
+        # upscaling (x -> 2x in the doubled first octave) avoids OpenCV's default half-pixel location bias.
+        _SIFT[key] = cv2.SIFT_create(
+            settings.max_features, 3, settings.contrast_threshold, 10.0, 1.6, cv2.CV_8U, True
+        )
+    return _SIFT[key]
+
+
+def detect(image: NDArray[np.uint8], settings: FeatureSettings) -> Keypoints:
+    """Illumination-corrected SIFT keypoints of a grey image, in full-image pixel coordinates."""
+    h, w = image.shape[:2]
+    scale = settings.scale_for(w)
+    if scale < 1:
+        size = (max(8, round(w * scale)), max(8, round(h * scale)))
+        small = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+    else:
+        small = image
+    sx, sy = small.shape[1] / w, small.shape[0] / h
+    kps, desc = _sift(settings).detectAndCompute(correct_illumination(small), None)
+    if not kps:
+        return Keypoints(np.zeros((0, 2)), np.zeros(0), np.zeros((0, 128), dtype=np.uint8))
+    pt = np.array([k.pt for k in kps], dtype=float)
+    uv = np.column_stack([(pt[:, 0] + 0.5) / sx - 0.5, (pt[:, 1] + 0.5) / sy - 0.5])
+    size = np.array([k.size for k in kps], dtype=float) / sx
+    return Keypoints(uv, size, np.asarray(desc, dtype=np.uint8))
+
+
+def _ratio_mutual(
+    ia: NDArray[np.intp], ib: NDArray[np.intp], d2: NDArray[np.float32], na: int, nb: int, ratio: float
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Of candidate pairs (ia, ib) with squared distances d2: the mutual nearest neighbours that pass
+    the ratio test against the second-best candidate on both sides."""
+    empty = np.zeros(0, dtype=np.intp)
+    if len(ia) == 0:
+        return empty, empty
+    r2 = ratio * ratio
+
+    def best(owner: NDArray[np.intp], n: int) -> tuple[NDArray[np.intp], NDArray[np.float32]]:
+        """For each owner index: the pair index of its best candidate and the second-best distance."""
+        order = np.lexsort((d2, owner))
+        first = np.ones(len(order), dtype=bool)
+        first[1:] = owner[order[1:]] != owner[order[:-1]]
+        starts = np.flatnonzero(first)
+        best_pair = np.full(n, -1, dtype=np.intp)
+        second = np.full(n, np.inf, dtype=np.float32)
+        best_pair[owner[order[starts]]] = order[starts]
+        has_second = np.append(starts[1:], len(order)) - starts > 1
+        second[owner[order[starts[has_second]]]] = d2[order[starts[has_second] + 1]]
+        return best_pair, second
+
+    best_a, second_a = best(ia, na)
+    best_b, second_b = best(ib, nb)
+    pair = best_a[best_a >= 0]
+    ok = best_b[ib[pair]] == pair
+    pair = pair[ok]
+    ok = (d2[pair] < r2 * second_a[ia[pair]]) & (d2[pair] < r2 * second_b[ib[pair]])
+    return ia[pair[ok]], ib[pair[ok]]
+
+
+def _sq_distances(desc_a: NDArray[np.uint8], desc_b: NDArray[np.uint8]) -> NDArray[np.float32]:
+    a = desc_a.astype(np.float32)
+    b = desc_b.astype(np.float32)
+    return np.maximum((a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * (a @ b.T), 0.0)
+
+
+def match_descriptors(
+    desc_a: NDArray[np.uint8], desc_b: NDArray[np.uint8], *, ratio: float
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Mutual nearest neighbours (all against all) that pass Lowe's ratio test both ways.
+
+    Parameters
+    ----------
+    desc_a, desc_b : ndarray, shapes (Na, 128), (Nb, 128)
+    ratio : float
+        Best distance must be below ``ratio`` times the second best.
+
+    Returns
+    -------
+    ia, ib : ndarray of int
+        Indices of the matched descriptors.
+    """
+    empty = np.zeros(0, dtype=np.intp)
+    if len(desc_a) < 2 or len(desc_b) < 2:
+        return empty, empty
+    d2 = _sq_distances(desc_a, desc_b)
+    rows = np.arange(len(desc_a))
+    ja = np.argmin(d2, axis=1)
+    best_a = d2[rows, ja]
+    d2[rows, ja] = np.inf
+    second_a = d2.min(axis=1)
+    d2[rows, ja] = best_a
+    cols = np.arange(len(desc_b))
+    ib_best = np.argmin(d2, axis=0)
+    d2[ib_best, cols]
+    d2[ib_best, cols] = np.inf
+    second_b = d2.min(axis=0)
+    r2 = ratio * ratio
+    ok = (ib_best[ja] == rows) & (best_a < r2 * second_a) & (best_a < r2 * second_b[ja])
+    return rows[ok], ja[ok]
+
+
+def match_candidates(
+    desc_a: NDArray[np.uint8],
+    desc_b: NDArray[np.uint8],
+    ia: NDArray[np.intp],
+    ib: NDArray[np.intp],
+    *,
+    ratio: float,
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Like :func:`match_descriptors` among the candidate pairs ``(ia[k], ib[k])`` only (e.g. the
+    stereo epipolar band): distances are computed for those pairs alone."""
+    diff = desc_a[ia].astype(np.float32) - desc_b[ib].astype(np.float32)
+    d2 = np.einsum("ij,ij->i", diff, diff)
+    return _ratio_mutual(ia, ib, d2, len(desc_a), len(desc_b), ratio)

@@ -1,0 +1,560 @@
+"""The loop-closure stage: features of every stereo pair, candidates, verification, ``loops.csv``.
+
+:func:`find_loops` runs, with every core (a process pool) and an optional progress callback:
+
+1. stereo features of every pair (:mod:`auvnav.vision.stereo`), cached in ``products/vision/features/``;
+   a missing or unreadable image skips its pair with a warning naming it;
+2. rounds of verification: the consecutive pairs and the candidates the prior makes probable
+   (:mod:`auvnav.vision.candidates`); each verified non-consecutive loop refines the drift model, so
+   the next round searches where the corrected prior now points, until no new candidate appears;
+3. a verification (:func:`~auvnav.vision.registration.register`) is accepted when the registration
+   is, and when it agrees with the prior: the horizontal displacement within the gate of the corrected
+   prior's uncertainty, the relative heading within ``max_heading_disagreement_rad`` of the compass's.
+
+``loops.csv`` (DESIGN section 6), one row per accepted pair, consecutive pairs included:
+
+- ``i, j``: 0-based rows of ``images/index.csv`` (i < j); ``t_i, t_j``: their times, POSIX seconds;
+- ``x_m, y_m, z_m, roll_deg, pitch_deg, yaw_deg``: the pose of body j in body i,
+  ``T_i_j = inv(T_ned_body_i) @ T_ned_body_j`` (translation in body i's FRD axes; Euler ZYX angles of
+  its rotation, ``R = Rz(yaw) Ry(pitch) Rx(roll)``);
+- ``cov00, cov01, ..., cov05, cov11, ..., cov55``: the upper triangle, row-major, of the 6 x 6
+  covariance of ``(x, y, z, roll, pitch, yaw)`` in metres and radians (SI, unlike the degree columns);
+- ``inliers``: registered point matches.
+
+The file is written and read by :mod:`auvnav.vision.loopfile`.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections.abc import Callable, Iterable
+from concurrent.futures import Executor, ProcessPoolExecutor
+from dataclasses import asdict, dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import chi2
+
+from auvnav.dive import Dive, ImageIndex
+from auvnav.errors import ConfigError, InsufficientDataError
+from auvnav.frames import angle_diff, euler2rot, rot2euler, se3, se3_inverse, wrap_angle
+from auvnav.streams import atomic_write
+from auvnav.trajectory import Trajectory, read_trajectory
+from auvnav.vehicle import StereoRig
+from auvnav.vision.camera import Rectification, T_body_cam, rectification
+from auvnav.vision.candidates import (
+    CandidateSettings,
+    DriftModel,
+    Footprints,
+    candidate_pairs,
+    footprints,
+)
+from auvnav.vision.features import FeatureSettings
+from auvnav.vision.loopfile import LoopClosures, loops_from_transforms, write_loops
+from auvnav.vision.registration import RegistrationSettings, _expm_so3, register
+from auvnav.vision.stereo import StereoFeatures, cache_path, pair_features
+
+log = logging.getLogger(__name__)
+
+FloatArray = NDArray[np.float64]
+Progress = Callable[[str, int, int], None]
+
+
+@dataclass(frozen=True)
+class LoopSettings:
+    """Everything the stage depends on.
+
+    Parameters
+    ----------
+    features, registration, candidates : settings of each step
+    prior_gate_probability : float
+        A loop's horizontal displacement must lie inside this chi-square (2 dof) quantile of the
+        corrected prior's relative uncertainty.
+    max_heading_disagreement_rad : float
+        Largest difference between the loop's relative heading and the compass's (the compass may be
+        off by its deviation, several degrees, at each of the two headings).
+    max_rounds : int
+        Rounds of candidate search and verification.
+    per_image_per_round : int
+        Most candidates an image takes part in per round, most probable first: the loops found
+        refine the prior before less probable candidates are tried.
+    """
+
+    features: FeatureSettings = field(default_factory=FeatureSettings)
+    registration: RegistrationSettings = field(default_factory=RegistrationSettings)
+    candidates: CandidateSettings = field(default_factory=CandidateSettings)
+    prior_gate_probability: float = 0.99999
+    max_heading_disagreement_rad: float = float(np.radians(20.0))
+    max_rounds: int = 50
+    per_image_per_round: int = 2
+
+
+@dataclass(frozen=True)
+class Verification:
+    """One tested pair, in body frames (see the module docstring for the pose convention)."""
+
+    i: int
+    j: int
+    accepted: bool
+    reason: str
+    pose6: FloatArray  # x, y, z (m), roll, pitch, yaw (rad) of T_i_j
+    cov6: FloatArray  # (6, 6), SI
+    matches: int
+    inliers: int
+    normalised_residual: float
+
+
+@dataclass(frozen=True)
+class LoopResult:
+    """What :func:`find_loops` found.
+
+    Parameters
+    ----------
+    loops : LoopClosures
+        Accepted pairs (the content of ``loops.csv``).
+    tested : list of Verification
+        Every pair tested, accepted or not.
+    summary : dict
+        Counts and timings (written as ``products/vision/summary.json``).
+    """
+
+    loops: LoopClosures
+    tested: list[Verification]
+    summary: dict[str, Any]
+
+
+def pose6(T: FloatArray) -> FloatArray:
+    """``(x, y, z, roll, pitch, yaw)`` of a 4x4 transform (Euler ZYX)."""
+    yaw, pitch, roll = rot2euler(T[:3, :3])
+    return np.array([*T[:3, 3], float(roll), float(pitch), float(yaw)])
+
+
+def body_pose_and_covariance(
+    T_cc: FloatArray, cov_xi: FloatArray, T_bc: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """The body-frame pose ``T_bi_bj = T_bc T_ci_cj T_bc^-1`` as 6 numbers and their covariance.
+
+    ``cov_xi`` is the covariance of the camera pose perturbation ``(dt, dtheta)`` of
+    :class:`~auvnav.vision.registration.Registration`; it is propagated with a central-difference
+    Jacobian.
+    """
+    T_cb = se3_inverse(T_bc)
+
+    def f(xi: FloatArray) -> FloatArray:
+        T = T_cc.copy()
+        T[:3, :3] = _expm_so3(xi[3:]) @ T_cc[:3, :3]
+        T[:3, 3] = T_cc[:3, 3] + xi[:3]
+        return pose6(T_bc @ T @ T_cb)
+
+    x0 = f(np.zeros(6))
+    J = np.zeros((6, 6))
+    h = 1e-6
+    for k in range(6):
+        e = np.zeros(6)
+        e[k] = h
+        d = f(e) - f(-e)
+        d[3:] = wrap_angle(d[3:])
+        J[:, k] = d / (2 * h)
+    return x0, J @ cov_xi @ J.T
+
+
+# ---------------------------------------------------------------------------------------------
+# Work done in the process pool
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Context:
+    images_dir: Path
+    rig: StereoRig
+    rect: Rectification
+    settings: LoopSettings
+    cache_dir: Path
+
+
+def _features_task(ctx: _Context, items: list[tuple[int, str, str]]) -> list[tuple[int, str | None, int]]:
+    """Fill the cache for pairs; return (index, cache file or None when skipped, feature count)."""
+    out = []
+    for k, left, right in items:
+        lp, rp = ctx.images_dir / left, ctx.images_dir / right
+        feats = pair_features(lp, rp, ctx.rig, ctx.rect, ctx.settings.features, ctx.cache_dir)
+        if feats is None:
+            out.append((k, None, 0))
+        else:
+            out.append(
+                (k, str(cache_path(ctx.cache_dir, lp, rp, ctx.rig, ctx.settings.features)), len(feats))
+            )
+    return out
+
+
+def _worker_init() -> None:
+    """One OpenCV thread per worker process: the pool already uses every core."""
+    cv2.setNumThreads(1)
+
+
+@lru_cache(maxsize=512)
+def _load(path: str) -> StereoFeatures:
+    with np.load(path) as z:
+        return StereoFeatures(z["uv"], z["p"], z["cov"], z["desc"])
+
+
+def _verify_task(
+    ctx: _Context, items: list[tuple[int, int, str, str, FloatArray, float]]
+) -> list[Verification]:
+    T_bc = T_body_cam(ctx.rig)
+    out = []
+    for i, j, pi, pj, T_prior, sigma in items:
+        reg = register(_load(pi), _load(pj), ctx.settings.registration, prior=(T_prior, sigma))
+        if reg.accepted:
+            p6, c6 = body_pose_and_covariance(reg.T_a_b, reg.cov_xi, T_bc)
+        else:
+            p6, c6 = np.full(6, np.nan), np.full((6, 6), np.nan)
+        out.append(
+            Verification(
+                i, j, reg.accepted, reg.reason, p6, c6, reg.matches, reg.inliers, reg.normalised_residual
+            )
+        )
+    return out
+
+
+def _chunks(items: list, size: int) -> Iterable[list]:
+    for k in range(0, len(items), size):
+        yield items[k : k + size]
+
+
+def _run(
+    pool: Executor | None,
+    fn: Callable[[_Context, list], list],
+    ctx: _Context,
+    items: list,
+    chunk: int,
+    stage: str,
+    progress: Progress | None,
+    done0: int = 0,
+    total: int | None = None,
+) -> list:
+    total = len(items) if total is None else total
+    results: list = []
+    done = done0
+    chunks = list(_chunks(items, chunk))
+    if pool is None:
+        outputs: Iterable[list] = (fn(ctx, c) for c in chunks)
+    else:
+        outputs = (f.result() for f in [pool.submit(fn, ctx, c) for c in chunks])
+    for c, out in zip(chunks, outputs, strict=True):
+        results.extend(out)
+        done += len(c)
+        if progress:
+            progress(stage, done, total)
+    return results
+
+
+# ---------------------------------------------------------------------------------------------
+# The stage
+# ---------------------------------------------------------------------------------------------
+
+
+def image_altitude(dive: Dive, t_s: FloatArray) -> FloatArray:
+    """DVL altitude at the image times (valid samples interpolated), metres."""
+    ok = dive.dvl.valid & np.isfinite(dive.dvl.altitude_m) & (dive.dvl.altitude_m > 0)
+    if ok.sum() < 2:
+        raise InsufficientDataError("nav/dvl: fewer than two valid altitudes; cannot place image footprints")
+    return np.interp(t_s, dive.dvl.t_s[ok], dive.dvl.altitude_m[ok])
+
+
+def read_prior(dive_path: Path) -> Trajectory:
+    """The navigation prior: ``products/nav/filter.csv``, else ``products/nav/dr.csv``."""
+    for name in ("filter.csv", "dr.csv"):
+        path = Path(dive_path) / "products" / "nav" / name
+        if path.is_file():
+            return read_trajectory(path)
+    raise InsufficientDataError(
+        f"{Path(dive_path) / 'products' / 'nav'}: no navigation (filter.csv or dr.csv); run `auvnav navigate` first"
+    )
+
+
+def _prior_check(
+    v: Verification, fp: Footprints, centre: FloatArray, sigma: float, settings: LoopSettings
+) -> str:
+    """Why a registered loop disagrees with the corrected prior ("" when it agrees).
+
+    ``sigma``: the corrected prior's relative uncertainty; the measured displacement's own
+    (:func:`measurement_sigma`) is added.
+    """
+    measured = fp.measured_displacement(np.array([v.i]), np.array([v.j]), v.pose6[None, :])[0]
+    err = measured - (centre[v.j] - centre[v.i])
+    sigma = float(np.hypot(sigma, measurement_sigma(measured[None, :])[0]))
+    if float(err @ err) / sigma**2 > chi2.ppf(settings.prior_gate_probability, 2):
+        return f"disagrees with the prior ({np.linalg.norm(err):.2f} m off, sigma {sigma:.2f} m)"
+    dyaw = angle_diff(v.pose6[5], angle_diff(fp.yaw_rad[v.j], fp.yaw_rad[v.i]))
+    if abs(dyaw) > settings.max_heading_disagreement_rad:
+        return f"relative heading {np.degrees(dyaw):.1f} deg off the compass's"
+    return ""
+
+
+def find_loops(
+    dive: Dive,
+    prior: Trajectory,
+    *,
+    settings: LoopSettings | None = None,
+    cache_dir: Path | None = None,
+    workers: int | None = None,
+    progress: Progress | None = None,
+) -> LoopResult:
+    """Loop closures of a dive with images.
+
+    Parameters
+    ----------
+    dive : Dive
+        Must have images and a stereo calibration; ``dive.path`` locates ``images/``.
+    prior : Trajectory
+        Navigation covering the image times (``products/nav/filter.csv`` or ``dr.csv``).
+    settings : LoopSettings, optional
+    cache_dir : Path, optional
+        Feature cache (default ``DIVE/products/vision/features``).
+    workers : int, optional
+        Processes; None: every core; 1: in this process.
+    progress : callable(stage, done, total), optional
+        Stages ``"features"`` and ``"verify"`` (its total grows as rounds add candidates).
+
+    Returns
+    -------
+    LoopResult
+    """
+    settings = settings or LoopSettings()
+    if dive.images is None or len(dive.images) == 0:
+        raise InsufficientDataError("images/index.csv: the dive has no images")
+    if dive.vehicle.stereo is None:
+        raise ConfigError(f"{dive.info.vehicle_file}: no stereo calibration (key stereo)")
+    if dive.path is None:
+        raise ValueError("find_loops needs dive.path to locate images/")
+    rig = dive.vehicle.stereo
+    images: ImageIndex = dive.images
+    t = images.t_s
+    inside = (t >= prior.t_s[0]) & (t <= prior.t_s[-1])
+    if not inside.all():
+        log.warning(
+            "images/index.csv: %d image(s) outside the navigation's time span ignored", int((~inside).sum())
+        )
+    index = np.flatnonzero(inside)
+    if len(index) < 2:
+        raise InsufficientDataError(
+            "images/index.csv: fewer than two images inside the navigation's time span"
+        )
+    cache_dir = Path(cache_dir) if cache_dir is not None else dive.path / "products" / "vision" / "features"
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    ctx = _Context(dive.path / "images", rig, rectification(rig), settings, cache_dir)
+    started = time.perf_counter()
+    pool = None if workers == 1 else ProcessPoolExecutor(max_workers=workers, initializer=_worker_init)
+    try:
+        items = [(int(k), str(images.left[k]), str(images.right[k])) for k in index]
+        feats = _run(pool, _features_task, ctx, items, 4, "features", progress)
+        t_features = time.perf_counter() - started
+        files = {k: f for k, f, _ in feats if f is not None}
+        n_features = {k: n for k, f, n in feats if f is not None}
+        usable = np.array(sorted(files), dtype=np.intp)
+        if len(usable) < 2:
+            raise InsufficientDataError("images: fewer than two readable stereo pairs")
+        pri = prior.interpolate(t[usable])
+        fp_u = footprints(pri, image_altitude(dive, t[usable]), rig)
+        speed = float(
+            np.median(np.linalg.norm(np.diff(pri.p_ned_m[:, :2], axis=0), axis=1) / np.diff(pri.t_s))
+        )
+        drift = DriftModel(pri.t_s, speed, settings.candidates)
+        # Work in positions within `usable` (u) and map back to image rows at the end.
+        tested: dict[tuple[int, int], Verification] = {}
+        consecutive = [(a, a + 1) for a in range(len(usable) - 1)]
+        todo = consecutive
+        rounds = 0
+        done = 0
+        total = 0
+        while todo and rounds < settings.max_rounds:
+            rounds += 1
+            total += len(todo)
+            work = _work_items(todo, usable, files, pri, drift, fp_u, T_body_cam(rig))
+            results = _run(pool, _verify_task, ctx, work, 16, "verify", progress, done, total)
+            done += len(work)
+            centre = fp_u.centre_ne_m + drift.correction(fp_u.t_s)
+            for v in results:
+                if v.accepted and v.j - v.i > 1:
+                    sigma = float(drift.relative_sigma(fp_u.t_s[[v.i]], fp_u.t_s[[v.j]])[0])
+                    reason = _prior_check(v, fp_u, centre, sigma, settings)
+                    if reason:
+                        v = Verification(
+                            v.i,
+                            v.j,
+                            False,
+                            reason,
+                            v.pose6,
+                            v.cov6,
+                            v.matches,
+                            v.inliers,
+                            v.normalised_residual,
+                        )
+                tested[(v.i, v.j)] = v
+            _refit(drift, fp_u, tested)
+            ci, cj, _ = candidate_pairs(fp_u, drift, settings.candidates, exclude=set(tested))
+            todo = _limit_per_image(ci, cj, settings.per_image_per_round)
+        if todo:
+            log.warning("stopped after %d rounds with %d candidates untested", rounds, len(todo))
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    # Back to image rows.
+    out = [
+        Verification(
+            int(usable[v.i]),
+            int(usable[v.j]),
+            v.accepted,
+            v.reason,
+            v.pose6,
+            v.cov6,
+            v.matches,
+            v.inliers,
+            v.normalised_residual,
+        )
+        for v in sorted(tested.values(), key=lambda v: (v.i, v.j))
+    ]
+    loops = loop_closures([v for v in out if v.accepted], t)
+    reasons: dict[str, int] = {}
+    for v in out:
+        if not v.accepted:
+            key = v.reason.split(" (")[0]
+            reasons[key] = reasons.get(key, 0) + 1
+    elapsed = time.perf_counter() - started
+    summary = {
+        "pairs": len(t),
+        "pairs_with_features": len(usable),
+        "pairs_skipped": int(len(index) - len(usable)),
+        "features_median": float(np.median(list(n_features.values()))) if n_features else 0.0,
+        "candidates_tested": len(out),
+        "consecutive_tested": len(consecutive),
+        "loops_accepted": int(sum(v.accepted for v in out)),
+        "nonconsecutive_accepted": int(sum(v.accepted and v.j - v.i > 1 for v in out)),
+        "rejected": reasons,
+        "rounds": rounds,
+        "features_s": t_features,
+        "elapsed_s": elapsed,
+        "pairs_per_s": len(usable) / elapsed if elapsed > 0 else float("nan"),
+        "settings": json.loads(json.dumps(asdict(settings), default=float)),
+    }
+    return LoopResult(loops, out, summary)
+
+
+def _work_items(
+    pairs: list[tuple[int, int]],
+    usable: NDArray[np.intp],
+    files: dict[int, str],
+    prior: Trajectory,
+    drift: DriftModel,
+    fp: Footprints,
+    T_bc: FloatArray,
+) -> list[tuple[int, int, str, str, FloatArray, float]]:
+    """Verification work: pairs with their feature files, the corrected prior's camera pose of j in i,
+    and its lateral uncertainty (the drift model's, plus a compass heading error of 0.1 rad turning the
+    displacement)."""
+    a = np.array([p[0] for p in pairs], dtype=np.intp)
+    b = np.array([p[1] for p in pairs], dtype=np.intp)
+    p_ned = prior.p_ned_m.copy()
+    p_ned[:, :2] += drift.correction(prior.t_s)
+    T = se3(prior.R_ned_body, p_ned) @ T_bc
+    T_ab = se3_inverse(T[a]) @ T[b]
+    sigma = drift.relative_sigma(fp.t_s[a], fp.t_s[b])
+    sigma = np.hypot(sigma, 0.1 * np.linalg.norm(T_ab[:, :2, 3], axis=1))
+    return [
+        (int(i), int(j), files[int(usable[i])], files[int(usable[j])], T_ab[k], float(sigma[k]))
+        for k, (i, j) in enumerate(zip(a, b, strict=True))
+    ]
+
+
+def _limit_per_image(i: NDArray[np.intp], j: NDArray[np.intp], cap: int) -> list[tuple[int, int]]:
+    """The pairs, in order, in which no image appears more than ``cap`` times."""
+    count: dict[int, int] = {}
+    out = []
+    for a, b in zip(i.tolist(), j.tolist(), strict=True):
+        if count.get(a, 0) < cap and count.get(b, 0) < cap:
+            out.append((a, b))
+            count[a] = count.get(a, 0) + 1
+            count[b] = count.get(b, 0) + 1
+    return out
+
+
+def _refit(drift: DriftModel, fp: Footprints, tested: dict[tuple[int, int], Verification]) -> None:
+    """Refit the drift model to the accepted non-consecutive loops (footprint-centre displacements)."""
+    acc = [v for v in tested.values() if v.accepted and v.j - v.i > 1]
+    if not acc:
+        return
+    i = np.array([v.i for v in acc])
+    j = np.array([v.j for v in acc])
+    measured = fp.measured_displacement(i, j, np.array([v.pose6 for v in acc]))
+    sigma = measurement_sigma(measured)
+    drift.fit(fp.t_s[i], fp.t_s[j], measured - (fp.centre_ne_m[j] - fp.centre_ne_m[i]), sigma)
+
+
+def measurement_sigma(measured_ne_m: FloatArray) -> FloatArray:
+    """1-sigma (per axis) of loop displacements turned into the world with the prior's heading: 5 cm
+    (footprint model) plus 3% of the length (a compass error of a couple of degrees turns the vector)."""
+    return 0.05 + 0.03 * np.linalg.norm(measured_ne_m, axis=1)
+
+
+def loop_closures(accepted: list[Verification], t_s: FloatArray) -> LoopClosures:
+    """The ``loops.csv`` content (:mod:`auvnav.vision.loopfile`) of accepted verifications."""
+    i = np.array([v.i for v in accepted], dtype=np.int64)
+    j = np.array([v.j for v in accepted], dtype=np.int64)
+    p6 = np.array([v.pose6 for v in accepted]).reshape(-1, 6)
+    cov = np.array([v.cov6 for v in accepted]).reshape(-1, 6, 6)
+    T = se3(euler2rot(p6[:, 5], p6[:, 4], p6[:, 3]), p6[:, :3])
+    inliers = np.array([v.inliers for v in accepted], dtype=np.int64)
+    return loops_from_transforms(i, j, t_s[i], t_s[j], T, cov, inliers)
+
+
+def write_loop_products(result: LoopResult, out_dir: Path) -> list[Path]:
+    """Write ``loops.csv`` and ``summary.json`` into ``out_dir`` (``DIVE/products/vision``)."""
+    out_dir = Path(out_dir)
+    loops_path = out_dir / "loops.csv"
+    write_loops(result.loops, loops_path)
+    summary_path = out_dir / "summary.json"
+    atomic_write(summary_path, lambda p: p.write_text(json.dumps(result.summary, indent=2), encoding="utf-8"))
+    return [loops_path, summary_path]
+
+
+def run_loop_stage(
+    dive_path: Path,
+    *,
+    settings: LoopSettings | None = None,
+    workers: int | None = None,
+    progress: Progress | None = None,
+) -> dict[str, Any]:
+    """``auvnav loops``: read the dive and its navigation, find loops, write ``products/vision/``.
+
+    Returns the summary (also ``products/vision/summary.json``) with the files written.
+    """
+    from auvnav.dive import read_dive
+
+    dive_path = Path(dive_path)
+    dive = read_dive(dive_path)
+    result = find_loops(dive, read_prior(dive_path), settings=settings, workers=workers, progress=progress)
+    files = write_loop_products(result, dive_path / "products" / "vision")
+    return {**result.summary, "files": [str(f) for f in files]}
+
+
+def format_loop_summary(summary: dict[str, Any]) -> str:
+    """The human summary of :func:`run_loop_stage`."""
+    lines = [
+        f"{summary['pairs_with_features']} stereo pairs ({summary['pairs_skipped']} skipped), "
+        f"median {summary['features_median']:.0f} triangulated features",
+        f"{summary['candidates_tested']} pairs tested ({summary['consecutive_tested']} consecutive) in "
+        f"{summary['rounds']} rounds: {summary['loops_accepted']} accepted, "
+        f"{summary['nonconsecutive_accepted']} of them loop closures",
+    ]
+    for reason, n in sorted(summary["rejected"].items(), key=lambda kv: -kv[1]):
+        lines.append(f"  rejected: {reason}: {n}")
+    lines.append(f"{summary['elapsed_s']:.0f} s, {summary['pairs_per_s']:.1f} stereo pairs/s")
+    lines += [f"wrote {f}" for f in summary["files"]]
+    return "\n".join(lines)

@@ -1,0 +1,342 @@
+"""Robust 6-DOF registration of two triangulated point sets, with a covariance.
+
+The paper registers the 3-D points triangulated in two stereo pairs "accounting for uncertainty in the
+triangulation", an approximation of the maximum-likelihood bundle adjustment that is much faster
+(section III, its reference [13]: Mahon, Williams, Pizarro and Johnson-Roberson 2008, IEEE Trans.
+Robotics 24(5)). Given matched points ``a_k`` (pair A's camera frame) and ``b_k`` (pair B's) with
+covariances ``S_a,k`` and ``S_b,k``, the pose ``T_a_b = (R, t)`` minimises
+
+    sum_k r_k^T (S_a,k + R S_b,k R^T)^-1 r_k,   r_k = a_k - (R b_k + t).
+
+Steps (:func:`register`):
+
+1. descriptor matches: mutual nearest neighbours passing Lowe's ratio test;
+2. RANSAC on minimal sets of three matches (Kabsch/Horn closed form; Horn 1987, JOSA A 4(4)), inliers by
+   the Mahalanobis distance above (chi-square, 3 degrees of freedom);
+3. weighted least squares (Gauss-Newton on the pose, weights re-evaluated with the current rotation);
+4. robust refinement: iteratively reweighted with Huber weights, inliers re-selected each iteration;
+5. covariance ``(J^T W J)^-1`` of the pose perturbation ``(dt, dtheta)`` with ``T <- (exp(dtheta) R,
+   t + dt)``.
+
+A registration is rejected, with the reason, when matches or inliers are too few, the inlier ratio too
+low, the fit poor (normalised residual too large), or the pose too uncertain.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import chi2
+
+from auvnav.frames import se3
+from auvnav.vision.features import match_descriptors
+from auvnav.vision.stereo import StereoFeatures
+
+FloatArray = NDArray[np.float64]
+RANSAC_SCORING_POINTS = 300
+
+
+@dataclass(frozen=True)
+class RegistrationSettings:
+    """Matching, RANSAC and rejection thresholds.
+
+    Parameters
+    ----------
+    ratio : float
+        Lowe's ratio test for descriptor matches between the two pairs.
+    inlier_probability : float
+        An inlier's squared Mahalanobis residual lies below the chi-square (3 dof) quantile of this.
+    ransac_confidence : float
+        Stop RANSAC when a better set would have been drawn with this probability.
+    ransac_max_iterations : int
+    huber_k : float
+        Huber threshold on the Mahalanobis residual, sigmas.
+    min_matches, min_inliers : int
+    min_inlier_ratio : float
+        Inliers over descriptor matches.
+    max_normalised_residual : float
+        Reject when ``sqrt(chi2 / dof)`` of the fit exceeds this (a fit much worse than the noise model).
+    max_sigma_translation_m, max_sigma_rotation_rad : float
+        Reject when the largest 1-sigma of the translation / rotation exceeds these.
+    seed : int
+        RANSAC's random samples.
+    """
+
+    ratio: float = 0.8
+    inlier_probability: float = 0.999
+    ransac_confidence: float = 0.9999
+    ransac_max_iterations: int = 1000
+    huber_k: float = 3.0
+    min_matches: int = 12
+    min_inliers: int = 25
+    min_inlier_ratio: float = 0.2
+    max_normalised_residual: float = 3.0
+    max_sigma_translation_m: float = 0.02
+    max_sigma_rotation_rad: float = float(np.radians(0.5))
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Registration:
+    """Outcome of one registration.
+
+    Parameters
+    ----------
+    accepted : bool
+    reason : str
+        Why it was rejected ("" when accepted).
+    T_a_b : ndarray, shape (4, 4)
+        Pose of frame B in frame A (``p_a = T_a_b p_b``); identity when no estimate exists.
+    cov_xi : ndarray, shape (6, 6)
+        Covariance of the perturbation ``(dt, dtheta)`` (metres, radians) with
+        ``T_a_b <- (exp(dtheta) R, t + dt)``.
+    matches, inliers : int
+    normalised_residual : float
+        ``sqrt(sum of squared Mahalanobis residuals / (3 inliers - 6))``: about 1 when the noise model holds.
+    """
+
+    accepted: bool
+    reason: str
+    T_a_b: FloatArray
+    cov_xi: FloatArray
+    matches: int
+    inliers: int
+    normalised_residual: float
+
+
+def _skew(v: FloatArray) -> FloatArray:
+    """Cross-product matrices of vectors (..., 3) -> (..., 3, 3)."""
+    z = np.zeros(v.shape[:-1])
+    x, y, w = v[..., 0], v[..., 1], v[..., 2]
+    return np.stack([np.stack([z, -w, y], -1), np.stack([w, z, -x], -1), np.stack([-y, x, z], -1)], -2)
+
+
+def _expm_so3(w: FloatArray) -> FloatArray:
+    """Rodrigues' formula for a rotation vector (3,)."""
+    theta = float(np.linalg.norm(w))
+    K = _skew(w)
+    if theta < 1e-12:
+        return np.eye(3) + K
+    return np.eye(3) + np.sin(theta) / theta * K + (1 - np.cos(theta)) / theta**2 * (K @ K)
+
+
+def kabsch(a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Least-squares rigid fit ``a ~ R b + t`` for point sets (..., n, 3); batched over leading axes."""
+    ca, cb = a.mean(-2), b.mean(-2)
+    H = np.swapaxes(b - cb[..., None, :], -1, -2) @ (a - ca[..., None, :])
+    U, _, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(np.swapaxes(Vt, -1, -2) @ np.swapaxes(U, -1, -2)))
+    D = np.zeros(H.shape)
+    D[..., 0, 0] = 1.0
+    D[..., 1, 1] = 1.0
+    D[..., 2, 2] = d
+    R = np.swapaxes(Vt, -1, -2) @ D @ np.swapaxes(U, -1, -2)
+    t = ca - (R @ cb[..., None])[..., 0]
+    return R, t
+
+
+def _inverse_sym3(S: FloatArray) -> FloatArray:
+    """Inverses of symmetric 3x3 matrices (..., 3, 3) by their adjugates (much faster than a batched
+    LAPACK call for millions of small matrices)."""
+    a, b, c = S[..., 0, 0], S[..., 0, 1], S[..., 0, 2]
+    d, e, f = S[..., 1, 1], S[..., 1, 2], S[..., 2, 2]
+    A00, A01, A02 = d * f - e * e, c * e - b * f, b * e - c * d
+    A11, A12, A22 = a * f - c * c, b * c - a * e, a * d - b * b
+    inv_det = 1.0 / (a * A00 + b * A01 + c * A02)
+    W = np.empty(S.shape)
+    W[..., 0, 0], W[..., 1, 1], W[..., 2, 2] = A00 * inv_det, A11 * inv_det, A22 * inv_det
+    W[..., 0, 1] = W[..., 1, 0] = A01 * inv_det
+    W[..., 0, 2] = W[..., 2, 0] = A02 * inv_det
+    W[..., 1, 2] = W[..., 2, 1] = A12 * inv_det
+    return W
+
+
+def _mahalanobis2(
+    a: FloatArray, b: FloatArray, Sa: FloatArray, Sb: FloatArray, R: FloatArray, t: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Residuals, their information matrices and squared Mahalanobis distances. R (..., 3, 3), t (..., 3)."""
+    Rb = b @ np.swapaxes(R, -1, -2)
+    r = a - Rb - t[..., None, :]
+    Rn = R[..., None, :, :]
+    S = Sa + Rn @ Sb @ np.swapaxes(Rn, -1, -2)
+    W = _inverse_sym3(S)
+    return r, W, np.sum(r * (W @ r[..., None])[..., 0], axis=-1)
+
+
+def _normal_equations(
+    b: FloatArray, R: FloatArray, r: FloatArray, W: FloatArray, w: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """``H = sum w J^T W J`` and ``g = sum w J^T W r`` with ``J = dr/d(dt, dtheta) = [-I, [R b]x]``."""
+    n = len(b)
+    J = np.concatenate([-np.broadcast_to(np.eye(3), (n, 3, 3)), _skew(b @ R.T)], axis=2)
+    WJ = (W @ J) * w[:, None, None]
+    H = J.reshape(3 * n, 6).T @ WJ.reshape(3 * n, 6)
+    g = WJ.reshape(3 * n, 6).T @ r.reshape(3 * n)
+    return H, g
+
+
+def _weights(d2: FloatArray, gate: float, huber_k: float | None) -> tuple[NDArray[np.bool_], FloatArray]:
+    inl = d2 < gate
+    w = inl.astype(float)
+    if huber_k is not None:
+        d = np.sqrt(d2)
+        w *= np.where(d <= huber_k, 1.0, huber_k / np.maximum(d, 1e-12))
+    return inl, w
+
+
+def _ransac(
+    a: FloatArray, b: FloatArray, Sa: FloatArray, Sb: FloatArray, gate: float, s: RegistrationSettings
+) -> NDArray[np.bool_]:
+    """The largest consensus set of minimal 3-point fits."""
+    rng = np.random.default_rng(s.seed)
+    n = len(a)
+    # Hypotheses are scored on at most RANSAC_SCORING_POINTS matches (preemptive scoring); the best
+    # one's consensus set is then taken over all matches.
+    if n > RANSAC_SCORING_POINTS:
+        score = np.sort(rng.choice(n, RANSAC_SCORING_POINTS, replace=False))
+    else:
+        score = np.arange(n)
+    sa, sb, sSa, sSb = a[score], b[score], Sa[score], Sb[score]
+    best_count = 0
+    best_model: tuple[FloatArray, FloatArray] | None = None
+    needed, done, batch = s.ransac_max_iterations, 0, 64
+    while done < needed:
+        idx = np.stack([rng.choice(n, 3, replace=False) for _ in range(batch)])
+        pa, pb = a[idx], b[idx]
+        # Skip degenerate triples: nearly collinear (small triangle).
+        area = np.linalg.norm(np.cross(pa[:, 1] - pa[:, 0], pa[:, 2] - pa[:, 0]), axis=1)
+        ok = area > 1e-3  # m^2: sides of a few centimetres at least
+        if ok.any():
+            R, t = kabsch(pa[ok], pb[ok])
+            _, _, d2 = _mahalanobis2(sa, sb, sSa, sSb, R, t)
+            counts = (d2 < gate).sum(axis=1)
+            k = int(np.argmax(counts))
+            if counts[k] > best_count:
+                best_count = int(counts[k])
+                best_model = (R[k], t[k])
+                w = best_count / len(score)
+                needed = min(
+                    s.ransac_max_iterations,
+                    int(np.ceil(np.log(1 - s.ransac_confidence) / np.log(max(1 - w**3, 1e-12)))),
+                )
+        done += batch
+    if best_model is None:
+        return np.zeros(n, dtype=bool)
+    return _mahalanobis2(a, b, Sa, Sb, *best_model)[2] < gate
+
+
+def _refine(
+    a: FloatArray,
+    b: FloatArray,
+    Sa: FloatArray,
+    Sb: FloatArray,
+    R: FloatArray,
+    t: FloatArray,
+    gate: float,
+    huber_k: float | None,
+    iterations: int = 10,
+) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_], FloatArray]:
+    """Gauss-Newton on the weighted (optionally Huber-reweighted) problem; inliers re-selected each step.
+
+    Returns R, t, the information matrix ``J^T W J`` of ``(dt, dtheta)``, the inlier mask and d2.
+    """
+    for _ in range(iterations):
+        r, W, d2 = _mahalanobis2(a, b, Sa, Sb, R, t)
+        _, w = _weights(d2, gate, huber_k)
+        H, g = _normal_equations(b, R, r, W, w)
+        try:
+            step = -np.linalg.solve(H, g)
+        except np.linalg.LinAlgError:
+            break
+        R = _expm_so3(step[3:]) @ R
+        t = t + step[:3]
+        if np.abs(step).max() < 1e-9:
+            break
+    r, W, d2 = _mahalanobis2(a, b, Sa, Sb, R, t)
+    inl, w = _weights(d2, gate, huber_k)
+    H, _ = _normal_equations(b, R, r, W, w)
+    return R, t, H, inl, d2
+
+
+def overlap_subsets(
+    a: StereoFeatures, b: StereoFeatures, T_a_b: FloatArray, sigma_m: float
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Indices of the points of A and of B that may lie in the other pair's view, given a prior pose.
+
+    A point of A is kept when its lateral (x, y) distance from the centroid of B's points, mapped into
+    A by ``T_a_b``, is within B's lateral reach (largest distance of a B point from its centroid) plus
+    ``3 sigma_m``; and the same for B. Matching only these saves most of the work of partial overlaps.
+    """
+    ca, cb = a.p_cam_m.mean(axis=0), b.p_cam_m.mean(axis=0)
+    reach_a = float(np.max(np.linalg.norm(a.p_cam_m[:, :2] - ca[:2], axis=1)))
+    reach_b = float(np.max(np.linalg.norm(b.p_cam_m[:, :2] - cb[:2], axis=1)))
+    cb_in_a = T_a_b[:3, :3] @ cb + T_a_b[:3, 3]
+    ca_in_b = T_a_b[:3, :3].T @ (ca - T_a_b[:3, 3])
+    keep_a = np.linalg.norm(a.p_cam_m[:, :2] - cb_in_a[:2], axis=1) <= reach_b + 3 * sigma_m
+    keep_b = np.linalg.norm(b.p_cam_m[:, :2] - ca_in_b[:2], axis=1) <= reach_a + 3 * sigma_m
+    return np.flatnonzero(keep_a), np.flatnonzero(keep_b)
+
+
+def register(
+    a: StereoFeatures,
+    b: StereoFeatures,
+    settings: RegistrationSettings | None = None,
+    *,
+    prior: tuple[FloatArray, float] | None = None,
+) -> Registration:
+    """Estimate ``T_a_b`` (the pose of pair B's left camera in pair A's) from two stereo feature sets.
+
+    ``prior``: an approximate ``T_a_b`` and the 1-sigma of its lateral position, metres; when given,
+    only points that may lie in both views are matched (:func:`overlap_subsets`).
+    """
+    s = settings or RegistrationSettings()
+    if prior is not None and len(a) and len(b):
+        sub_a, sub_b = overlap_subsets(a, b, *prior)
+    else:
+        sub_a, sub_b = np.arange(len(a)), np.arange(len(b))
+    ia, ib = match_descriptors(a.descriptors[sub_a], b.descriptors[sub_b], ratio=s.ratio)
+    ia, ib = sub_a[ia], sub_b[ib]
+
+    def reject(
+        reason: str, inliers: int = 0, rho: float = float("nan"), T: FloatArray | None = None
+    ) -> Registration:
+        return Registration(
+            False, reason, np.eye(4) if T is None else T, np.full((6, 6), np.nan), len(ia), inliers, rho
+        )
+
+    if len(ia) < max(s.min_matches, 3):
+        return reject(f"too few matches ({len(ia)} < {s.min_matches})")
+    pa, pb = a.p_cam_m[ia], b.p_cam_m[ib]
+    Sa, Sb = a.cov_cam_m2[ia], b.cov_cam_m2[ib]
+    gate = float(chi2.ppf(s.inlier_probability, 3))
+    inl = _ransac(pa, pb, Sa, Sb, gate, s)
+    if inl.sum() < 3:
+        return reject("no consistent set of matches")
+    R, t = kabsch(pa[inl], pb[inl])
+    R, t, _, inl, _ = _refine(pa, pb, Sa, Sb, R, t, gate, None)  # weighted fit
+    R, t, H, inl, d2 = _refine(pa, pb, Sa, Sb, R, t, gate, s.huber_k)  # robust refinement
+    n_in = int(inl.sum())
+    T = se3(R, t)
+    dof = 3 * n_in - 6
+    rho = float(np.sqrt(d2[inl].sum() / dof)) if dof > 0 else float("nan")
+    if n_in < s.min_inliers:
+        return reject(f"too few inliers ({n_in} < {s.min_inliers})", n_in, rho, T)
+    if n_in < s.min_inlier_ratio * len(ia):
+        return reject(f"inlier ratio {n_in / len(ia):.2f} < {s.min_inlier_ratio}", n_in, rho, T)
+    if not rho <= s.max_normalised_residual:
+        return reject(f"poor fit (normalised residual {rho:.2f} > {s.max_normalised_residual})", n_in, rho, T)
+    try:
+        cov = np.linalg.inv(H)
+    except np.linalg.LinAlgError:
+        return reject("singular information matrix", n_in, rho, T)
+    sig = np.sqrt(np.clip(np.diag(cov), 0, None))
+    if not (sig[:3].max() <= s.max_sigma_translation_m and sig[3:].max() <= s.max_sigma_rotation_rad):
+        return reject(
+            f"pose too uncertain (sigma {sig[:3].max():.3f} m, {np.degrees(sig[3:].max()):.2f} deg)",
+            n_in,
+            rho,
+            T,
+        )
+    return Registration(True, "", T, cov, len(ia), n_in, rho)

@@ -1,0 +1,109 @@
+"""The loop-closure stage end to end on a tiny rendered dive: command, products, cache, bad input."""
+
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from auvnav.cli import main
+from auvnav.dive import read_dive
+from auvnav.evaluate import read_truth
+from auvnav.sim.camera import default_stereo_rig
+from auvnav.vehicle import read_vehicle, write_vehicle
+from auvnav.vision.camera import rectification
+from auvnav.vision.evaluate import loops_section
+from auvnav.vision.features import FeatureSettings
+from auvnav.vision.loopfile import read_loops
+from auvnav.vision.loops import LoopSettings, find_loops, read_prior
+from auvnav.vision.stereo import cache_path, pair_features
+
+FAST = LoopSettings(features=FeatureSettings(max_features=1500))
+
+
+@pytest.fixture(scope="module")
+def loops_run(tiny_dive):
+    """``auvnav loops DIVE --json --workers 1`` once; its printed summary."""
+    import contextlib
+    import io
+
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        code = main(["loops", str(tiny_dive.path), "--json", "--workers", "1"])
+    assert code == 0
+    return json.loads(out.getvalue())
+
+
+def test_command_writes_loops_that_match_the_truth(tiny_dive, loops_run) -> None:
+    loops = read_loops(tiny_dive.path / "products" / "vision" / "loops.csv", n_poses=20)
+    assert loops_run["consecutive_tested"] == 19
+    assert loops_run["nonconsecutive_accepted"] > 3
+    assert len(loops) == loops_run["loops_accepted"]
+    assert np.all(loops.i < loops.j)
+    scores = loops_section(tiny_dive.path, read_truth(tiny_dive.path), 0.0)
+    assert scores is not None
+    assert scores["recall"] >= 0.8
+    assert scores["precision"] >= 0.95
+    assert scores["translation_error_median_m"] < 0.02  # 340 px images: coarser than the acceptance dive
+    assert scores["rotation_error_median_deg"] < 0.5
+    assert 1.0 < scores["mahalanobis_mean"] < 20.0
+    assert scores["candidates_tested"] == loops_run["candidates_tested"]
+
+
+def test_features_are_cached(tiny_dive, loops_run) -> None:
+    cache = tiny_dive.path / "products" / "vision" / "features"
+    files = sorted(cache.iterdir())
+    assert len(files) == loops_run["pairs_with_features"]
+    dive = read_dive(tiny_dive.path)
+    rig = dive.vehicle.stereo
+    left, right = (tiny_dive.path / "images" / str(n) for n in (dive.images.left[4], dive.images.right[4]))
+    settings = FeatureSettings()
+    path = cache_path(cache, left, right, rig, settings)
+    assert path in files
+    stamp = path.stat().st_mtime_ns
+    again = pair_features(left, right, rig, rectification(rig), settings, cache)
+    assert path.stat().st_mtime_ns == stamp  # read back, not recomputed
+    assert len(again) > 100
+    # other settings are another cache entry
+    assert cache_path(cache, left, right, rig, FeatureSettings(scale=0.5)) != path
+
+
+def test_missing_and_corrupt_images_are_skipped_with_a_warning(tiny_dive, tmp_path: Path, caplog) -> None:
+    copy = tmp_path / "dive"
+    shutil.copytree(tiny_dive.path, copy, ignore=shutil.ignore_patterns("features"))
+    index = copy / "images" / "index.csv"
+    index.write_text("\n".join(index.read_text().splitlines()[:9]) + "\n")  # the first 8 pairs
+    (copy / "images" / "left" / "000003.png").unlink()
+    (copy / "images" / "right" / "000007.png").write_bytes(b"not a png")
+    with caplog.at_level(logging.WARNING):
+        result = find_loops(read_dive(copy), read_prior(copy), workers=1, settings=FAST)
+    text = caplog.text
+    assert "000003.png: image missing" in text
+    assert "000007.png: not a readable image" in text
+    assert result.summary["pairs_skipped"] == 2
+    assert result.summary["loops_accepted"] > 0
+
+
+def test_calibration_that_does_not_match_the_images_is_one_line(tiny_dive, tmp_path: Path, capsys) -> None:
+    copy = tmp_path / "dive"
+    shutil.copytree(tiny_dive.path, copy, ignore=shutil.ignore_patterns("products"))
+    shutil.copytree(tiny_dive.path / "products" / "nav", copy / "products" / "nav")
+    vehicle = read_vehicle(copy / "vehicle.yaml")
+    import dataclasses
+
+    write_vehicle(dataclasses.replace(vehicle, stereo=default_stereo_rig()), copy / "vehicle.yaml")
+    assert main(["loops", str(copy), "--workers", "1", "-q"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert "image is 340x256 but the stereo calibration" in err[0]
+
+
+def test_without_navigation_the_command_says_what_to_run(tiny_dive, tmp_path: Path, capsys) -> None:
+    copy = tmp_path / "dive"
+    shutil.copytree(tiny_dive.path, copy, ignore=shutil.ignore_patterns("products"))
+    assert main(["loops", str(copy), "-q"]) == 1
+    assert "run `auvnav navigate` first" in capsys.readouterr().err

@@ -1,0 +1,148 @@
+"""Descriptor matching, robust registration and its covariance, candidate probabilities, drift model."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from auvnav.frames import euler2rot, se3
+from auvnav.vision.candidates import (
+    CandidateSettings,
+    DriftModel,
+    Footprints,
+    candidate_pairs,
+    disc_overlap,
+    overlap_distance,
+    overlap_probability,
+)
+from auvnav.vision.features import match_candidates, match_descriptors
+from auvnav.vision.registration import Registration, RegistrationSettings, _expm_so3, register
+from auvnav.vision.stereo import StereoFeatures
+
+
+def _descriptors(rng: np.random.Generator, n: int) -> np.ndarray:
+    return rng.integers(0, 120, (n, 128)).astype(np.uint8)
+
+
+def test_matching_recovers_a_permutation_and_respects_candidates() -> None:
+    rng = np.random.default_rng(0)
+    a = _descriptors(rng, 200)
+    perm = rng.permutation(200)
+    b = np.clip(a[perm].astype(int) + rng.integers(-3, 4, (200, 128)), 0, 255).astype(np.uint8)
+    ia, ib = match_descriptors(a, b, ratio=0.8)
+    assert len(ia) == 200
+    np.testing.assert_array_equal(perm[ib], ia)
+    # restricted to candidate pairs: only pairs offered can match, the rest as before
+    offered = np.arange(0, 200, 2)
+    ca = np.concatenate([perm[offered], perm[offered]])
+    cb = np.concatenate([offered, (offered + 1) % 200])
+    ja, jb = match_candidates(a, b, ca, cb, ratio=0.8)
+    assert set(zip(ja.tolist(), jb.tolist(), strict=True)) == set(
+        zip(perm[offered].tolist(), offered.tolist(), strict=True)
+    )
+
+
+def _point_sets(rng: np.random.Generator, T_a_b: np.ndarray, n: int, outliers: int = 0):
+    """Matched stereo-like point sets: depth ~2 m, depth noise 15 mm, lateral noise 1 mm."""
+    p_b = np.column_stack([rng.uniform(-0.6, 0.6, n), rng.uniform(-0.45, 0.45, n), rng.uniform(1.8, 2.3, n)])
+    p_a_true = p_b @ T_a_b[:3, :3].T + T_a_b[:3, 3]
+    cov = np.diag([1e-3, 1e-3, 15e-3]) ** 2
+    Sa = np.broadcast_to(cov, (n, 3, 3)).copy()
+    Sb = Sa.copy()
+    p_a = p_a_true + rng.multivariate_normal(np.zeros(3), cov, n)
+    p_b = p_b + rng.multivariate_normal(np.zeros(3), cov, n)
+    p_a[:outliers] += rng.uniform(-0.3, 0.3, (outliers, 3))
+    desc = _descriptors(rng, n)
+    return (
+        StereoFeatures(np.zeros((n, 2)), p_a, Sa, desc),
+        StereoFeatures(np.zeros((n, 2)), p_b, Sb, desc.copy()),
+    )
+
+
+def _error(reg: Registration, T_true: np.ndarray) -> np.ndarray:
+    """(dt, dtheta) with T_true = (exp(dtheta) R, t + dt), as the registration's covariance."""
+    import cv2
+
+    dtheta = cv2.Rodrigues(T_true[:3, :3] @ reg.T_a_b[:3, :3].T)[0].ravel()
+    return np.concatenate([T_true[:3, 3] - reg.T_a_b[:3, 3], dtheta])
+
+
+def test_registration_is_robust_and_its_covariance_is_honest() -> None:
+    """Monte Carlo: the normalised errors follow a chi-square with 6 degrees of freedom."""
+    rng = np.random.default_rng(3)
+    T = se3(euler2rot(2.0, 0.03, -0.02), np.array([0.3, -0.2, 0.05]))
+    d2 = []
+    for _ in range(100):
+        a, b = _point_sets(rng, T, 120, outliers=25)
+        reg = register(a, b)
+        assert reg.accepted, reg.reason
+        assert reg.inliers >= 90
+        e = _error(reg, T)
+        d2.append(e @ np.linalg.solve(reg.cov_xi, e))
+    # mean of chi2(6) over 100 draws: 6 +- 3.5 * sqrt(12 / 100) (3.5 sigma)
+    assert abs(np.mean(d2) - 6.0) < 3.5 * np.sqrt(12 / 100)
+    assert np.mean(np.array(d2) > chi2.ppf(0.99, 6)) < 0.05
+
+
+def test_registration_rejects_unrelated_sets_with_a_reason() -> None:
+    rng = np.random.default_rng(4)
+    a, _ = _point_sets(rng, np.eye(4), 100)
+    _, b = _point_sets(rng, np.eye(4), 100)  # different descriptors: nothing matches
+    reg = register(a, b)
+    assert not reg.accepted and "too few matches" in reg.reason
+    a, b = _point_sets(rng, np.eye(4), 30)
+    reg = register(a, b, RegistrationSettings(min_inliers=40))
+    assert not reg.accepted and "too few inliers" in reg.reason
+
+
+def test_expm_so3_is_rodrigues() -> None:
+    import cv2
+
+    w = np.array([0.3, -0.2, 0.5])
+    np.testing.assert_allclose(_expm_so3(w), cv2.Rodrigues(w)[0], atol=1e-12)
+
+
+def test_disc_overlap_reference_values() -> None:
+    # lens area of two unit circles at distance 1: 2 pi / 3 - sqrt(3) / 2 (of pi)
+    assert disc_overlap(0.0) == pytest.approx(1.0)
+    assert disc_overlap(1.0) == pytest.approx((2 * np.pi / 3 - np.sqrt(3) / 2) / np.pi)
+    assert disc_overlap(2.0) == pytest.approx(0.0)
+    assert disc_overlap(overlap_distance(0.3)) == pytest.approx(0.3, abs=1e-9)
+
+
+def test_overlap_probability_matches_monte_carlo() -> None:
+    rng = np.random.default_rng(5)
+    mu, sigma, d_max = 0.8, 0.5, 0.6
+    x = rng.normal([mu, 0.0], sigma, (200000, 2))
+    expected = np.mean(np.linalg.norm(x, axis=1) <= d_max)
+    assert overlap_probability(np.array([mu]), np.array([sigma]), np.array([d_max]))[0] == pytest.approx(
+        expected, abs=0.005
+    )
+
+
+def test_drift_model_grows_with_time_and_shrinks_at_loops() -> None:
+    t = np.arange(0.0, 2000.0, 1.0)
+    model = DriftModel(t, 0.5, CandidateSettings())
+    s = model.relative_sigma(np.zeros(4), np.array([10.0, 100.0, 500.0, 1500.0]))
+    assert np.all(np.diff(s) > 0)
+    assert s[2] == pytest.approx(0.02 * 0.5 * 500, rel=0.5)  # about 2% of the distance travelled
+    model.fit(np.array([200.0]), np.array([1200.0]), np.array([[1.0, -2.0]]), np.array([0.05]))
+    assert model.relative_sigma(np.array([200.0]), np.array([1200.0]))[0] < 0.1
+    np.testing.assert_allclose(
+        model.correction(np.array([1200.0])) - model.correction(np.array([200.0])), [[1.0, -2.0]], atol=0.01
+    )
+
+
+def test_candidates_find_the_crossings_of_a_grid() -> None:
+    """Two perpendicular passes over the same line of images: the crossing pairs are candidates."""
+    t = np.arange(0.0, 400.0, 1.0)
+    first = np.column_stack([0.5 * t[:200] - 50, np.zeros(200)])
+    second = np.column_stack([np.zeros(200), 0.5 * t[:200] - 50])
+    centre = np.vstack([first, second])
+    fp = Footprints(t, centre, np.full(400, 0.75), np.zeros(400), np.zeros((400, 3)))
+    settings = CandidateSettings()
+    i, j, p = candidate_pairs(fp, DriftModel(t, 0.5, settings), settings)
+    assert len(i) > 0 and np.all(p >= settings.p_min) and np.all(j - i > 1)
+    crossing = (np.linalg.norm(centre[i], axis=1) < 1.5) & (np.linalg.norm(centre[j], axis=1) < 1.5)
+    assert np.any(crossing)
