@@ -169,12 +169,28 @@ def _slam(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, An
     return scores
 
 
-#: Sections in output order: name -> scorer (returns None when its products are absent).
+def _loops(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, Any] | None:
+    """Visual loop closures against the truly overlapping pairs (:mod:`auvnav.vision.evaluate`)."""
+    from auvnav.vision.evaluate import loops_section
+
+    return loops_section(dive_path, truth, distance_m)
+
+
+def _depth(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, Any] | None:
+    """Loop-closure depth residuals before and after the tide (:mod:`auvnav.depth.validation`)."""
+    from auvnav.depth.validation import depth_section
+
+    return depth_section(dive_path)
+
+
+#: Sections in output order (DESIGN section 7): name -> scorer (None when its products are absent).
 SECTIONS: dict[str, Section] = {
     "dr": trajectory_section("nav/dr.csv"),
     "filter": trajectory_section("nav/filter.csv"),
     "slam": _slam,
+    "loops": _loops,
     "compass": _compass,
+    "depth": _depth,
 }
 
 
