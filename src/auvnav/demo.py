@@ -11,7 +11,6 @@ pretending they ran.
 
 from __future__ import annotations
 
-import json
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -19,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from auvnav.errors import OutputExistsError
-from auvnav.streams import atomic_write
+from auvnav.streams import write_json
 
 log = logging.getLogger(__name__)
 
@@ -168,8 +167,7 @@ def run_demo(
         "headline": _headline(dives),
         "not_yet_built": list(NOT_YET),
     }
-    text = json.dumps(summary, indent=2, default=float) + "\n"
-    atomic_write(out / "summary.json", lambda p: p.write_text(text, encoding="utf-8"))
+    write_json(summary, out / "summary.json")
     return summary
 
 

@@ -9,13 +9,14 @@ file and reports every problem (file, row, column) instead of guessing; :meth:`S
 from __future__ import annotations
 
 import dataclasses
+import json
 import logging
 import os
 import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar, Literal, TypeVar
+from typing import Any, ClassVar, Literal, TypeVar
 
 import numpy as np
 import pandas as pd
@@ -348,6 +349,12 @@ def atomic_write(path: Path, write: Callable[[Path], None]) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def write_json(data: Any, path: Path) -> None:
+    """Write a summary as indented JSON (numpy scalars as floats), atomically."""
+    text = json.dumps(data, indent=2, default=float) + "\n"
+    atomic_write(Path(path), lambda p: p.write_text(text, encoding="utf-8"))
 
 
 def write_table(frame: pd.DataFrame, path: Path) -> None:

@@ -72,7 +72,7 @@ from auvnav.dive import Dive, find_stream_file, read_dive
 from auvnav.errors import DiveFormatError, InsufficientDataError, OutputExistsError, Problem
 from auvnav.frames import FloatArray
 from auvnav.nav.inputs import NavInputs, nav_inputs
-from auvnav.streams import Field, Stream, atomic_write, read_stream, write_stream
+from auvnav.streams import Field, Stream, atomic_write, read_stream, write_json, write_stream
 from auvnav.vision.loopfile import LoopClosures, read_loops
 
 log = logging.getLogger(__name__)
@@ -715,8 +715,7 @@ def write_depth_products(result: DepthResult, out_dir: Path) -> list[Path]:
     out_dir.mkdir(parents=True, exist_ok=True)
     written = [out_dir / "loop_depth.csv", out_dir / "summary.json"]
     write_stream(result.loops, written[0])
-    text = json.dumps(result.summary(), indent=2) + "\n"
-    atomic_write(written[1], lambda p: p.write_text(text, encoding="utf-8"))
+    write_json(result.summary(), written[1])
     estimated = out_dir / "tide_estimated.csv"
     if result.estimate is None:
         estimated.unlink(missing_ok=True)  # not left over from an earlier run

@@ -16,7 +16,6 @@ The stage is rerunnable: a rerun replaces these files (each written atomically) 
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,7 +31,7 @@ from auvnav.nav.cmg import TransitLeg, course_made_good
 from auvnav.nav.deadreckon import Start, dead_reckon, start_position
 from auvnav.nav.filter import FilterConfig, FilterResult, run_filter
 from auvnav.nav.inputs import HeadingCorrection, NavInputs, nav_inputs
-from auvnav.streams import atomic_write, write_table
+from auvnav.streams import write_json, write_table
 from auvnav.trajectory import Trajectory, write_trajectory, write_tum
 
 PRODUCTS_DIR = Path("products") / "nav"
@@ -232,8 +231,7 @@ def write_products(result: NavResult, out_dir: Path) -> list[Path]:
         written += [out_dir / f"{stem}.csv", out_dir / f"{stem}.tum"]
     write_table(result.filter.innovations.to_frame(), out_dir / "innovations.csv")
     write_table(legs_frame(result.legs), out_dir / "cmg.csv")
-    text = json.dumps(result.summary(), indent=2) + "\n"
-    atomic_write(out_dir / "summary.json", lambda p: p.write_text(text, encoding="utf-8"))
+    write_json(result.summary(), out_dir / "summary.json")
     written += [out_dir / "innovations.csv", out_dir / "cmg.csv", out_dir / "summary.json"]
     return written
 

@@ -17,7 +17,6 @@ Products (DESIGN section 6), in ``DIVE/products/slam/``, replaced by a rerun:
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,7 +43,7 @@ from auvnav.slam.graph import (
     solution_trajectory,
     solve,
 )
-from auvnav.streams import atomic_write
+from auvnav.streams import write_json
 from auvnav.trajectory import Trajectory, write_trajectory, write_tum
 from auvnav.vision.loopfile import LoopClosures, read_loops
 
@@ -242,9 +241,8 @@ def write_products(result: SlamResult, out_dir: Path) -> list[Path]:
         write_correction(result.deviation, written[-1], overwrite=True, record=record)
     else:
         (out_dir / CORRECTION_FILE).unlink(missing_ok=True)  # an earlier run's estimate is stale
-    text = json.dumps(result.summary(), indent=2) + "\n"
     written.append(out_dir / "summary.json")
-    atomic_write(written[-1], lambda p: p.write_text(text, encoding="utf-8"))
+    write_json(result.summary(), written[-1])
     return written
 
 

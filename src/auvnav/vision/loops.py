@@ -44,7 +44,7 @@ from scipy.stats import chi2
 from auvnav.dive import Dive, ImageIndex
 from auvnav.errors import ConfigError, InsufficientDataError
 from auvnav.frames import angle_diff, euler2rot, rot2euler, se3, se3_inverse, wrap_angle
-from auvnav.streams import atomic_write
+from auvnav.streams import write_json
 from auvnav.trajectory import Trajectory, read_trajectory
 from auvnav.vehicle import StereoRig
 from auvnav.vision.camera import Rectification, T_body_cam, rectification
@@ -520,7 +520,7 @@ def write_loop_products(result: LoopResult, out_dir: Path) -> list[Path]:
     loops_path = out_dir / "loops.csv"
     write_loops(result.loops, loops_path)
     summary_path = out_dir / "summary.json"
-    atomic_write(summary_path, lambda p: p.write_text(json.dumps(result.summary, indent=2), encoding="utf-8"))
+    write_json(result.summary, summary_path)
     return [loops_path, summary_path]
 
 
