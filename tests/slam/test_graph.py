@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from auvnav.frames import euler2rot, rot2euler, se3, se3_inverse, wrap_angle
 from auvnav.nav import FilterConfig, nav_inputs
 from auvnav.nav.synthetic import Noise, legs_motion, synthetic_dive
-from auvnav.slam.compass import COEFFICIENTS_KEY, PITCH_SIGMA_RAD, CompassModel, heading_factor, yaw_jacobian
+from auvnav.slam.compass import COEFFICIENTS_KEY, TILT_SIGMA_RAD, CompassModel, heading_factor, yaw_jacobian
 from auvnav.slam.graph import (
     MERGE_S,
     UNMEASURED_SIGMA_M,
@@ -78,12 +78,24 @@ def test_heading_factor_measures_the_heading_only(
 ) -> None:
     """A heading error e costs (e / sigma)^2; a pitch error is left to the inclinometer's factor."""
     sigma = math.radians(2.0)
-    factor = heading_factor(pose_key(0), yaw, euler2rot(yaw, pitch, roll), np.eye(3), sigma)
+    factor = heading_factor(pose_key(0), yaw, euler2rot(yaw, pitch, roll), np.eye(3), sigma, np.zeros(3))
     T = se3(euler2rot(yaw + error, pitch, roll), np.zeros(3))
     chi2 = 2.0 * factor.error(_values(T))
-    assert chi2 == pytest.approx((error / sigma) ** 2, rel=2e-3, abs=1e-9)
+    assert chi2 == pytest.approx((error / sigma) ** 2, rel=1e-6, abs=1e-12)
     tilted = se3(euler2rot(yaw, pitch + 0.02, roll), np.zeros(3))
-    assert 2.0 * factor.error(_values(tilted)) == pytest.approx((0.02 / PITCH_SIGMA_RAD) ** 2, rel=0.02)
+    assert 2.0 * factor.error(_values(tilted)) == pytest.approx((0.02 / TILT_SIGMA_RAD) ** 2, rel=0.02)
+
+
+@pytest.mark.parametrize("turn_deg", [90.0, 170.0, 179.0])
+def test_heading_factor_grows_up_to_a_half_turn(turn_deg: float) -> None:
+    """A pose turned by d about the vertical costs (d / sigma)^2 however large d: a flip is not free."""
+    sigma = math.radians(10.0)
+    R = euler2rot(0.4, 0.1, -0.2)
+    factor = heading_factor(pose_key(0), 0.4, R, np.eye(3), sigma, np.zeros(3))
+    turned = se3(euler2rot(0.4 + math.radians(turn_deg), 0.1, -0.2), np.zeros(3))
+    assert 2.0 * factor.error(_values(turned)) == pytest.approx(
+        (math.radians(turn_deg) / sigma) ** 2, rel=1e-6
+    )
 
 
 def test_heading_factor_of_a_rotated_compass() -> None:
@@ -91,7 +103,7 @@ def test_heading_factor_of_a_rotated_compass() -> None:
     mount = euler2rot(math.pi / 2, 0.0, 0.0)
     R_body = euler2rot(0.3, 0.05, -0.02)
     measured = float(rot2euler(R_body @ mount)[0])
-    factor = heading_factor(pose_key(0), measured, R_body @ mount, mount, math.radians(1.0))
+    factor = heading_factor(pose_key(0), measured, R_body @ mount, mount, math.radians(1.0), np.zeros(3))
     assert factor.error(_values(se3(R_body, np.zeros(3)))) == pytest.approx(0.0, abs=1e-16)
     assert measured == pytest.approx(0.3 + math.pi / 2, abs=0.01)
 
@@ -105,7 +117,7 @@ def test_estimated_compass_factor_error_and_jacobians() -> None:
     x = np.array([0.01, 0.02, -0.03, 0.005, 0.004])
     phi = np.array([1.0, math.cos(h), math.sin(h), math.cos(2 * h), math.sin(2 * h)])
     T = se3(euler2rot(0.9, 0.1, -0.05), np.array([1.0, 2.0, 3.0]))
-    factor = model.factor(pose_key(0), h, T[:3, :3], math.radians(1.0))
+    factor = model.factor(pose_key(0), h, T[:3, :3], math.radians(1.0), T[:3, 3])
     yaw_compass = rot2euler(T[:3, :3] @ model.R_body_compass)[0]
     expected = wrap_angle(yaw_compass - 0.04 - h - phi @ x)
     np.testing.assert_allclose(factor.unwhitenedError(_values(T, x)), [expected], atol=1e-12)

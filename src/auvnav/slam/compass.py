@@ -25,7 +25,7 @@ correction file then records ``constant.source: graph``. When the posterior of `
 least :data:`OBSERVABLE_RATIO` tighter than its prior, the constant is reported as ``arbitrary`` (it
 is the prior's, pulled by whatever weak information the dive holds), as a fit to SLAM headings is.
 
-With a raw or fixed correction the factor is GTSAM's ``AttitudeFactorPose3`` with a heading-only
+With a raw or fixed correction the factor is GTSAM's ``PriorFactorPose3`` with a heading-only
 information (:func:`heading_factor`); the estimated one is a Python ``CustomFactor`` (it joins the
 coefficients). Its Jacobians are analytic, for GTSAM's right perturbation ``R Exp(w)`` of a pose (tangent ordering
 ``(w, v)``): the yaw ``psi = atan2(R10, R00)`` of ``R' = R M`` moves by
@@ -41,7 +41,7 @@ import gtsam
 import numpy as np
 
 from auvnav.compass.deviation import DeviationModel, fourier_design
-from auvnav.frames import FloatArray, rot2euler, wrap_angle
+from auvnav.frames import FloatArray, euler2rot, rot2euler, wrap_angle
 
 #: Prior sigma of each harmonic coefficient (a1..bN): weak, several times a calibrated compass's
 #: deviation (paper section II-C: O(1) degree after calibration, "several degrees" before).
@@ -50,8 +50,14 @@ HARMONIC_PRIOR_SIGMA_RAD = math.radians(10.0)
 #: its prior sigma.
 OBSERVABLE_RATIO = 0.5
 
-#: The pitch direction of a heading factor is this loose, radians (the inclinometer's factor holds it).
-PITCH_SIGMA_RAD = 1.0
+#: A heading factor's sigma across the vertical (roll and pitch), radians: loose, the inclinometer's
+#: factor holds them.
+TILT_SIGMA_RAD = 1.0
+#: Sigma of a coordinate a factor does not measure (a heading factor's translation, a fix's depth, the
+#: pressure depth's north and east), metres: its information is 1e-10 of a centimetre-level
+#: measurement's, so it neither constrains nor, at tens of metres from its nominal value, adds more
+#: than 1e-5 to the chi-square.
+UNMEASURED_SIGMA_M = 1e4
 
 #: The key of the compass coefficients in the graph (poses are ``gtsam.symbol("x", k)``).
 COEFFICIENTS_KEY = gtsam.symbol("c", 0)
@@ -64,18 +70,24 @@ def yaw_jacobian(R: FloatArray) -> FloatArray:
 
 
 def heading_factor(
-    key: int, heading_rad: float, R_ned_sensor: FloatArray, R_body_sensor: FloatArray, sigma_rad: float
-) -> gtsam.AttitudeFactorPose3:
-    """A unary factor on the heading of a sensor frame of a pose (GTSAM's ``AttitudeFactorPose3``).
+    key: int,
+    heading_rad: float,
+    R_ned_sensor: FloatArray,
+    R_body_sensor: FloatArray,
+    sigma_rad: float,
+    p_ned_m: FloatArray,
+) -> gtsam.PriorFactorPose3:
+    """A unary factor on the heading of a sensor frame of a pose: a ``PriorFactorPose3`` on its heading.
 
-    The factor compares the sensor's forward axis in NED, ``R_ned_body R_body_sensor e_x``, with the
-    measured one, ``n = Rz(heading) Ry(pitch) e_x`` (pitch of ``R_ned_sensor``); its 2-vector error
-    lives in the tangent of the unit sphere at ``n`` (basis ``B``, GTSAM's ``Unit3.basis()``). A
-    heading error ``d psi`` and a pitch error ``d theta`` give, to first order,
-    ``e = C [d psi, d theta]`` with ``C = B^T [e_z x n, dn/d theta]``, so the information
-    ``C^-T diag(sigma^-2, PITCH_SIGMA_RAD^-2) C^-1`` makes it a heading factor of sigma ``sigma_rad``
-    that leaves the pitch to the inclinometer's own factor. Built in C++: fast in GTSAM's optimisers,
-    unlike a Python ``CustomFactor``.
+    The prior is the body attitude whose sensor frame has the measured heading (and the measured
+    pitch and roll), ``R0 = Rz(heading) Ry(pitch) Rx(roll) R_body_sensor^T``. A turn of the pose
+    about the vertical by ``d`` is the rotation vector ``d u`` in GTSAM's tangent at ``R0``,
+    ``u = R0^T e_z`` (the vertical in the body frame), exactly, for any ``|d| < pi``; the information
+    ``u u^T / sigma^2`` on the rotation (plus :data:`TILT_SIGMA_RAD` across it and
+    :data:`UNMEASURED_SIGMA_M` on the translation, at ``p_ned_m``, so that the matrix is positive
+    definite) makes it a heading factor that leaves roll and pitch to the inclinometer's own factor.
+    Its error grows all the way to a half turn (a flipped pose costs the most), and it is built in
+    C++: fast in GTSAM's optimisers, unlike a Python ``CustomFactor``.
 
     Parameters
     ----------
@@ -84,22 +96,22 @@ def heading_factor(
     heading_rad : float
         The measured heading of the sensor frame (true north), radians.
     R_ned_sensor : ndarray, shape (3, 3)
-        The measured attitude of the sensor frame (its pitch is used).
+        The measured attitude of the sensor frame (its pitch and roll are used).
     R_body_sensor : ndarray, shape (3, 3)
         The sensor's mount.
     sigma_rad : float
         Heading sigma, radians.
+    p_ned_m : ndarray, shape (3,)
+        Where to put the prior's (unmeasured) translation: the pose's initial guess, metres.
     """
-    _, pitch, _ = rot2euler(R_ned_sensor)
-    c, s, cp, sp = math.cos(heading_rad), math.sin(heading_rad), math.cos(pitch), math.sin(pitch)
-    n = np.array([c * cp, s * cp, -sp])
-    u = np.array([-s * cp, c * cp, 0.0])  # e_z x n
-    w = np.array([-c * sp, -s * sp, -cp])  # dn / d pitch
-    nref = gtsam.Unit3(n)
-    C_inv = np.linalg.inv(nref.basis().T @ np.column_stack([u, w]))
-    info = C_inv.T @ np.diag([sigma_rad**-2, PITCH_SIGMA_RAD**-2]) @ C_inv
-    noise = gtsam.noiseModel.Gaussian.Information(0.5 * (info + info.T))
-    return gtsam.AttitudeFactorPose3(key, nref, noise, gtsam.Unit3(np.asarray(R_body_sensor)[:, 0]))
+    _, pitch, roll = rot2euler(R_ned_sensor)
+    R0 = euler2rot(heading_rad, pitch, roll) @ np.asarray(R_body_sensor, dtype=float).T
+    u = R0[2]  # R0^T e_z
+    info = np.zeros((6, 6))
+    info[:3, :3] = np.outer(u, u) / sigma_rad**2 + (np.eye(3) - np.outer(u, u)) / TILT_SIGMA_RAD**2
+    info[3:, 3:] = np.eye(3) / UNMEASURED_SIGMA_M**2
+    prior = gtsam.Pose3(gtsam.Rot3(R0), np.asarray(p_ned_m, dtype=float))
+    return gtsam.PriorFactorPose3(key, prior, gtsam.noiseModel.Gaussian.Information(info))
 
 
 @dataclass(frozen=True)
@@ -152,7 +164,7 @@ class CompassModel:
         return wrap_angle(h + delta + self.declination_rad)
 
     def factor(
-        self, key: int, h_rad: float, R_ned_body_measured: FloatArray, sigma_rad: float
+        self, key: int, h_rad: float, R_ned_body_measured: FloatArray, sigma_rad: float, p_ned_m: FloatArray
     ) -> gtsam.NonlinearFactor:
         """The heading factor of the pose ``key`` for the compass heading ``h_rad`` (module docstring).
 
@@ -166,12 +178,13 @@ class CompassModel:
             The measured attitude (its pitch and roll place the compass's forward axis).
         sigma_rad : float
             Heading sigma.
+        p_ned_m : ndarray, shape (3,)
+            The pose's initial position (see :func:`heading_factor`).
         """
         M = np.asarray(self.R_body_compass, dtype=float)
         if not self.estimate:
-            return heading_factor(
-                key, float(self.heading_target(np.array(h_rad))), R_ned_body_measured @ M, M, sigma_rad
-            )
+            target = float(self.heading_target(np.array(h_rad)))
+            return heading_factor(key, target, R_ned_body_measured @ M, M, sigma_rad, p_ned_m)
         noise = gtsam.noiseModel.Isotropic.Sigma(1, sigma_rad)
         phi = fourier_design(np.array([h_rad]), self.harmonics)[0]
         base = float(wrap_angle(h_rad + self.declination_rad))

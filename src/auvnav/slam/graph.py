@@ -93,7 +93,7 @@ from auvnav.dive import Dive
 from auvnav.errors import DiveFormatError, InsufficientDataError, Problem
 from auvnav.frames import FloatArray, euler2rot, rot2euler, se3, wrap_angle
 from auvnav.nav import FilterConfig, NavInputs, dead_reckon
-from auvnav.slam.compass import COEFFICIENTS_KEY, CompassModel
+from auvnav.slam.compass import COEFFICIENTS_KEY, UNMEASURED_SIGMA_M, CompassModel
 from auvnav.slam.g2o import PoseGraph
 from auvnav.slam.solve import PoseGraphSolveError, robust_threshold
 from auvnav.streams import Field, read_table
@@ -120,10 +120,6 @@ ODOMETRY_TILT_FACTOR = 5.0
 GRADUATED_SCALES = (64.0, 8.0, 1.0)
 #: Huber threshold of the GPS and USBL factors, whitened (sigmas).
 FIX_HUBER_K = 3.0
-#: Sigma of a coordinate a position factor does not measure, metres: its information is 1e-10 of a
-#: centimetre-level measurement's, so it neither constrains nor, at tens of metres from its nominal
-#: value, adds more than 1e-5 to the chi-square.
-UNMEASURED_SIGMA_M = 1e4
 
 _IMAGE_TIMES_FIELDS = (Field("t_s", ("t",)),)
 # GTSAM's Pose3 tangent is (rotation, translation); g2o's and the loop file's translation first.
@@ -722,7 +718,9 @@ def build_graph(
         factors.add(
             "compass",
             k,
-            compass.factor(key, float(meas.compass_heading_rad[k]), meas.R_ned_body[k], heading_sigma),
+            compass.factor(
+                key, float(meas.compass_heading_rad[k]), meas.R_ned_body[k], heading_sigma, initial[k, :3, 3]
+            ),
         )
 
     # Position fixes at their poses (merged within MERGE_S of an image time), north and east.
