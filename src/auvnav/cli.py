@@ -85,10 +85,6 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-if __name__ == "__main__":
-    sys.exit(main())
-
-
 # ---------------------------------------------------------------------------------------------
 # validate
 # ---------------------------------------------------------------------------------------------
@@ -819,3 +815,7 @@ def slam(
         marginal_every=marginal_every,
     )
     emit(summary, format_summary(summary), as_json=as_json)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
