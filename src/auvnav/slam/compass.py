@@ -27,9 +27,10 @@ is the prior's, pulled by whatever weak information the dive holds), as a fit to
 
 With a raw or fixed correction the factor is GTSAM's ``PriorFactorPose3`` with a heading-only
 information (:func:`heading_factor`); the estimated one is a Python ``CustomFactor`` (it joins the
-coefficients). Its Jacobians are analytic, for GTSAM's right perturbation ``R Exp(w)`` of a pose (tangent ordering
-``(w, v)``): the yaw ``psi = atan2(R10, R00)`` of ``R' = R M`` moves by
-``d psi = j(R') . M^T w`` with ``j(R) = [0, R10 R02 - R00 R12, R00 R11 - R10 R01] / (R00^2 + R10^2)``.
+coefficients). Its Jacobians are analytic, for GTSAM's right perturbation ``R Exp(w)`` of a pose
+(tangent ordering ``(w, v)``): the yaw ``psi = atan2(R10, R00)`` of ``R' = R M`` moves by
+``d psi = j(R') . M^T w``, ``j(R) = [0, R10 R02 - R00 R12, R00 R11 - R10 R01] / (R00^2 + R10^2)``,
+and by ``-phi(h)`` with the coefficients.
 """
 
 from __future__ import annotations

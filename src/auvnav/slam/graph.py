@@ -32,17 +32,19 @@ Factors
   increments are as good as the compass's noise; through a turn they give way to the imagery.
 - **Roll and pitch** (``AttitudeFactorPose3``: the measured direction of gravity in the body), the
   inclinometer's sigma (``vehicle.pitch_roll_sigma_rad``).
-- **Depth** (custom factor on the down coordinate): pressure depth of the reference point (TEOS-10,
-  lever arm removed), less the tide when a tide model is given (DESIGN section 4: depth below the
-  datum), sigma the pressure sensor's.
-- **Compass heading** (custom factor on yaw, :mod:`auvnav.slam.compass`): raw, corrected by a given
-  correction, or with the deviation's coefficients estimated. Its sigma is an option; by default the
+- **Depth** (:func:`position_factor` on the down coordinate only): pressure depth of the reference
+  point (TEOS-10, lever arm removed), less the tide when a tide model is given (DESIGN section 4:
+  depth below the datum), sigma the pressure sensor's.
+- **Compass heading** (:mod:`auvnav.slam.compass`: a prior on the heading, or a Python factor that
+  joins the deviation's coefficients): raw, corrected by a given correction, or with the deviation's
+  coefficients estimated. Its sigma is an option; by default the
   compass's (``vehicle.heading_sigma_rad``) times :data:`HEADING_INFLATION` for a raw compass (the
   paper's "artificially large heading measurement noise": the headings come from the imagery and
   the compass's bias does not leak into them), and the compass's own with a correction or when
   estimating the deviation.
-- **GPS and USBL** (custom factor on the horizontal position of the antenna or transponder, lever
-  arm included, Huber kernel at :data:`FIX_HUBER_K` sigmas against the odd bad fix), their sigmas.
+- **GPS and USBL** (:func:`position_factor` on the horizontal position of the antenna or
+  transponder, lever arm included, Huber kernel at :data:`FIX_HUBER_K` sigmas against the odd bad
+  fix), their sigmas.
   Without fixes, a prior on the first pose's horizontal position at the dive's origin
   (``FilterConfig.origin_sigma_m``) fixes the gauge.
 - **Loop closures** (``BetweenFactorPose3``) with the file's covariance converted to GTSAM's tangent
@@ -69,8 +71,9 @@ pose by pose with every factor that joins it to the poses before it, the chosen 
 (each new loop closure meets an estimate that the earlier ones already corrected).
 
 Marginal covariances of the poses come from ``gtsam.Marginals`` on the solved graph (robust factors
-at their final weights); ``marginal_every`` > 1 computes every that-many-th image pose (and the
-last) and interpolates the sigmas in time between them.
+at their final weights, the rejected loop closures left out); ``marginal_every`` > 1 computes every
+that-many-th image pose (and the first and last poses) and interpolates the sigmas in time between
+them. Every pose of a navigation check dive takes seconds.
 """
 
 from __future__ import annotations
@@ -915,6 +918,7 @@ def _one_line(err: Exception) -> str:
 def _isam2(sg: SensorGraph) -> tuple[gtsam.Values, int]:
     """iSAM2 pose by pose with every factor that joins it to earlier poses."""
     params = gtsam.ISAM2Params()
+    params.setFactorization("QR")  # Cholesky meets indefinite pivots with the loose heading priors
     isam = gtsam.ISAM2(params)
     order = np.argsort(sg.last_pose, kind="stable")
     bounds = np.searchsorted(sg.last_pose[order], np.arange(-1, len(sg.times) + 1))

@@ -45,7 +45,7 @@ from auvnav.slam.graph import (
 )
 from auvnav.streams import write_json
 from auvnav.trajectory import Trajectory, write_trajectory, write_tum
-from auvnav.vision.loopfile import LoopClosures, read_loops
+from auvnav.vision.loopfile import LoopClosures, check_loops, read_loops
 
 PRODUCTS_DIR = Path("products") / "slam"
 LOOPS_FILE = Path("products") / "vision" / "loops.csv"
@@ -162,7 +162,8 @@ def slam(
     image_source : str
         Where the image times came from, for messages.
     loops : LoopClosures, optional
-        Checked: poses must exist.
+        Checked (:func:`auvnav.vision.loopfile.check_loops`): its poses must be image rows, its
+        covariances positive definite, its times the image times.
     correction : DeviationModel, optional
         A fixed compass correction (not with ``options.estimate_compass``).
     tide : TideModel, optional
@@ -175,11 +176,15 @@ def slam(
     ------
     ConfigError
         A correction given together with ``estimate_compass``.
+    DiveFormatError
+        A bad loop row (one line naming it).
     """
     options = options or SlamOptions()
     names = names or {}
     if correction is not None and options.estimate_compass:
         raise ConfigError("give --compass-correction or --estimate-compass, not both")
+    if loops is not None:
+        check_loops(loops, len(image_t_s), names.get("loops_file") or "loops")
     inputs = nav_inputs(dive, None if options.estimate_compass else correction)
     times = build_pose_times(image_t_s, inputs, aux_period_s=options.aux_period_s, source=image_source)
     compass = CompassModel(
@@ -300,7 +305,7 @@ def run_slam(
     if not loops_path.is_file():
         hint = "run `auvnav loops` first, or give --loops FILE (a simulated dive's truth/loops.csv)"
         raise DiveFormatError([Problem(str(loops_path), f"not found: {hint}")])
-    loop_data = read_loops(loops_path, n_poses=len(image_t))
+    loop_data = read_loops(loops_path)  # its rows are checked against the image times by slam()
     options = SlamOptions(
         compass_sigma_rad=None if compass_sigma_deg is None else math.radians(compass_sigma_deg),
         estimate_compass=estimate_compass,
