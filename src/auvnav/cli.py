@@ -275,6 +275,13 @@ def compass_calibrate(
         _CalibrationMethod,
         typer.Option("--method", help="levelled: horizontal fit (a barely tilting spin); ellipsoid: 3D."),
     ] = _CalibrationMethod.levelled,
+    field_model: Annotated[
+        bool,
+        typer.Option(
+            "--field-model/--no-field-model",
+            help="Reference the vertical to the geomagnetic model's inclination at the dive's site and date.",
+        ),
+    ] = True,
     as_json: JsonOpt = False,
     verbose: VerboseOpt = 0,
     quiet: QuietOpt = False,
@@ -283,7 +290,7 @@ def compass_calibrate(
     from auvnav.compass.calibrate import calibrate_dive, format_calibration
 
     setup_logging(verbose, quiet)
-    summary = calibrate_dive(dive, method=method.value)
+    summary = calibrate_dive(dive, method=method.value, field_model=field_model)
     emit(summary, format_calibration(summary), as_json=as_json)
 
 

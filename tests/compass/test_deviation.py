@@ -216,6 +216,21 @@ def test_fix_constant_exact_data() -> None:
     assert fixed.covariance[0, 0] == pytest.approx(g @ np.diag([1e-6, 1e-6]) @ g, abs=1e-15)
 
 
+def test_fix_constant_adds_the_common_error(true_deviation) -> None:
+    """An error shared by every transit (the DVL's yaw mounting) adds to the constant's variance
+    and nothing else; it cannot be negative."""
+    h = np.radians([0.0, 90.0, 180.0, 270.0])
+    y = true_deviation(h) + np.radians([0.1, -0.05, 0.02, 0.0])
+    alone = fix_constant(true_deviation, h, y)
+    common = math.radians(0.1)
+    both = fix_constant(true_deviation, h, y, common_sigma_rad=common)
+    assert both.a0_rad == alone.a0_rad
+    assert both.covariance[0, 0] == pytest.approx(alone.covariance[0, 0] + common**2, rel=1e-12)
+    np.testing.assert_array_equal(both.covariance[1:], alone.covariance[1:])
+    with pytest.raises(ValueError, match="common_sigma_rad"):
+        fix_constant(true_deviation, h, y, common_sigma_rad=-0.1)
+
+
 def test_fix_constant_needs_two_transits(true_deviation) -> None:
     with pytest.raises(InsufficientDataError, match="at least 2 transits; got 1"):
         fix_constant(true_deviation, [0.1], [0.02])

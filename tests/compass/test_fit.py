@@ -3,6 +3,7 @@ the constant from GPS course made good on transits, the single-dive variant, and
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import shutil
@@ -23,9 +24,17 @@ from auvnav.compass import (
     read_true_deviation,
     write_correction,
 )
-from auvnav.compass.fit import HeadingPairs, fit_compass, heading_pairs
-from auvnav.dive import Dive
-from auvnav.frames import euler2rot, wrap_angle
+from auvnav.compass.fit import (
+    DVL_YAW_SIGMA_DEG,
+    HeadingPairs,
+    fit_compass,
+    heading_pairs,
+    smooth_surface_fixes,
+)
+from auvnav.dive import Dive, GpsStream
+from auvnav.frames import euler2rot, geodetic2ned, ned2geodetic, wrap_angle
+from auvnav.nav import dead_reckon, nav_inputs
+from auvnav.nav.synthetic import Noise, legs_motion, synthetic_dive
 from auvnav.trajectory import Trajectory, read_trajectory, write_trajectory
 from auvnav.vehicle import Mount
 
@@ -35,9 +44,10 @@ SHAPE_RMS_DEG = 0.15
 SHAPE_MAX_DEG = 0.3
 # Truth as the reference gives the true constant, up to the pairs' noise (0.2 deg over ~570 pairs).
 TRUTH_CONSTANT_DEG = 0.05
-# Four legs of 300 m between single GPS fixes of 3 m (1 sigma): 3 sqrt(2) / 300 rad = 0.8 deg of
-# course noise per leg, 0.4 deg on the constant; the bound is three times that.
-TRANSIT_CONSTANT_DEG = 1.2
+# Four legs of 300 m between surface stays of two minutes of 3 m GPS fixes (1 sigma), smoothed: 0.54 m
+# at each end of a leg, 0.15 deg of course noise per leg and 0.07 deg on the constant, plus the
+# DVL's yaw misalignment (0.1 deg, 1 sigma); the bound is about three times that.
+TRANSIT_CONSTANT_DEG = 0.35
 
 
 def _fit_json(capsys, *args: str) -> dict:
@@ -85,6 +95,71 @@ def test_pairs_turn_the_reference_into_the_compass_frame_and_magnetic(small_dive
     assert len(steady) == 0 and steady.turning == 50
     pooled = HeadingPairs.concatenate([pairs, pairs])
     assert len(pooled) == 100 and pooled.dives == ("small", "small") and set(pooled.dive_index) == {0, 1}
+
+
+# --- surface fixes smoothed through dead reckoning ------------------------------------------------
+
+STAY_FIXES = 120  # two minutes of 1 Hz fixes, as the simulator's surface waits
+
+
+@pytest.fixture(scope="module")
+def two_stays():
+    """A 1 km leg at 030 (2 Hz) with two minutes of 3 m GPS fixes at each end, its dead reckoning
+    and the fixes' antenna positions in local NED."""
+    motion = legs_motion([(math.radians(30.0), 1000.0)], rate_hz=2.0)
+    t = motion.truth.t_s
+    gps_t = np.concatenate([t[0] + np.arange(STAY_FIXES), t[-1] - np.arange(STAY_FIXES)[::-1]])
+    dive = synthetic_dive(motion, gps_times_s=gps_t, noise=Noise(seed=11))
+    dr = dead_reckon(nav_inputs(dive))
+    return motion, dive, dr
+
+
+def _fixes_ned(dive: Dive) -> np.ndarray:
+    g = dive.gps
+    return geodetic2ned(g.latitude_rad, g.longitude_rad, np.zeros(len(g)), dive.info.origin)[:, :2]
+
+
+def test_smoothed_fixes_are_closer_to_the_truth(two_stays) -> None:
+    """Each stay's fixes follow the dead reckoning about a fitted line: the error of the fixes
+    shrinks by about sqrt(n), and each sigma is the line's at its time."""
+    motion, dive, dr = two_stays
+    smoothed = smooth_surface_fixes(dive, dr)
+    true = motion.truth.interpolate(dive.gps.t_s).p_ned_m[:, :2]
+    raw_rms = np.sqrt(np.mean((_fixes_ned(dive) - true) ** 2))
+    smooth_rms = np.sqrt(np.mean((_fixes_ned(smoothed) - true) ** 2))
+    assert 2.5 < raw_rms < 3.5 and smooth_rms < 0.25 * raw_rms
+    dt = np.arange(STAY_FIXES) - (STAY_FIXES - 1) / 2.0
+    end_sigma = 3.0 * math.sqrt(1.0 / STAY_FIXES + dt[-1] ** 2 / float(dt @ dt))  # 0.54 m
+    assert smoothed.gps.sigma_m[0] == pytest.approx(end_sigma) == smoothed.gps.sigma_m[-1]
+    np.testing.assert_array_equal(smoothed.gps.t_s, dive.gps.t_s)
+    assert smoothed.dvl is dive.dvl and dive.gps.sigma_m[0] == 3.0  # a copy; the input is unchanged
+
+
+def test_smoothing_follows_a_drift_the_dead_reckoning_misses(two_stays) -> None:
+    """A steady 5 cm/s drift of the fixes within each stay (a surface current without bottom lock)
+    is followed to the stay's end, where a plain mean of the offsets would be 3 m off."""
+    motion, dive, dr = two_stays
+    g = dive.gps
+    stay_start = np.where(np.arange(len(g)) < STAY_FIXES, g.t_s[0], g.t_s[STAY_FIXES])
+    p = geodetic2ned(g.latitude_rad, g.longitude_rad, np.zeros(len(g)), dive.info.origin)
+    p[:, 0] += 0.05 * (g.t_s - stay_start)
+    lat, lon, _ = ned2geodetic(p, dive.info.origin)
+    drifting = dataclasses.replace(dive, gps=GpsStream(g.t_s, lat, lon, g.sigma_m))
+    smoothed = _fixes_ned(smooth_surface_fixes(drifting, dr))
+    true = motion.truth.interpolate(g.t_s).p_ned_m[:, :2]
+    true[:, 0] += 0.05 * (g.t_s - stay_start)
+    ends = [STAY_FIXES - 1, STAY_FIXES]  # the ends of the leg between the stays
+    assert np.all(np.linalg.norm(smoothed[ends] - true[ends], axis=1) < 1.0)
+
+
+def test_short_stays_are_kept(two_stays) -> None:
+    """Stays of fewer than three fixes are left as they are."""
+    motion, _dive, dr = two_stays
+    t = motion.truth.t_s
+    dive = synthetic_dive(motion, gps_times_s=np.array([t[0], t[1], t[-1]]), noise=Noise(seed=12))
+    smoothed = smooth_surface_fixes(dive, dr)
+    np.testing.assert_array_equal(smoothed.gps.latitude_rad, dive.gps.latitude_rad)
+    np.testing.assert_array_equal(smoothed.gps.sigma_m, dive.gps.sigma_m)
 
 
 # --- the fit from simulated dives ----------------------------------------------------------------
@@ -138,6 +213,8 @@ def test_constant_from_small_transits(simulated, truth_fit, tmp_path: Path, caps
     )
     c = summary["constant"]
     assert c["source"] == "gps-transits" and c["legs"] == 4 and c["dives"] == ["transit"]
+    assert c["dvl_yaw_sigma_deg"] == pytest.approx(DVL_YAW_SIGMA_DEG) and c["sigma_deg"] > DVL_YAW_SIGMA_DEG
+    assert all(leg["course_sigma_deg"] < 0.2 for leg in summary["legs"])  # smoothed fixes: 0.15 deg
     assert all(leg["used"] for leg in summary["legs"])
     headings = sorted(leg["heading_deg"] for leg in summary["legs"])
     assert np.allclose(np.diff(headings), 90.0, atol=5.0)  # the four legs of the square
@@ -196,8 +273,9 @@ def test_dives_are_pooled(simulated, truth_fit) -> None:
 
 
 def test_slam_reference_missing_is_one_line(simulated, tmp_path: Path, capsys) -> None:
+    """``--reference slam`` is the default: a dive without SLAM products says to run ``auvnav slam``."""
     line = _one_line_error(capsys, "fit", str(simulated.navcheck), "--out", str(tmp_path / "c.yaml"))
-    assert "products/slam/trajectory.csv: not found" in line
+    assert "products/slam/trajectory.csv: not found" in line and "run `auvnav slam" in line
     line = _one_line_error(capsys, "fit", str(simulated.navcheck), "--reference", "nowhere.csv")
     assert "nowhere.csv: --reference is neither truth, slam nor a trajectory file" in line
 

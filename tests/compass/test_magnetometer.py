@@ -145,6 +145,78 @@ def test_levelled_calibration_on_spin(spin) -> None:
     assert cal.field_spread_after < 0.1 * cal.field_spread_before
 
 
+def _vertical_like_horizontal(H_soft: np.ndarray) -> np.ndarray:
+    """``H_soft`` with the vertical scale set to the horizontal block's geometric mean and no
+    horizontal response to the vertical field: what a level spin cannot tell from hard iron."""
+    H = H_soft.copy()
+    H[:2, 2] = 0.0
+    H[2, 2] = math.sqrt(np.linalg.det(np.eye(2) + H[:2, :2])) - 1.0
+    return H
+
+
+@pytest.fixture(scope="module")
+def level_spin(scott_reef_field):
+    """Two turns at exactly zero pitch and roll with 0.1% magnetometer noise: the vertical offset is
+    invisible in the shape of the data."""
+    f = scott_reef_field
+    heading = np.linspace(0.0, 4.0 * np.pi, 800)
+    b = _body_field(f, heading, 0.0, 0.0)
+    rng = np.random.default_rng(7)
+
+    def measure(H_soft: np.ndarray, h_hard: np.ndarray) -> np.ndarray:
+        return distort_field(b, H_soft, h_hard) + rng.normal(0.0, 1e-3 * f.total_T, b.shape)
+
+    return heading, measure
+
+
+def test_levelled_vertical_offset_from_the_field_model(level_spin, scott_reef_field) -> None:
+    """With the model's inclination a level spin gives the full hard iron to 1% of the field and
+    the calibrated field the model's direction; without it the vertical offset stays zero."""
+    f = scott_reef_field
+    heading, measure = level_spin
+    h_hard = HARD_IRON_FRACTION * f.total_T
+    m = measure(_vertical_like_horizontal(H_SOFT_SYMMETRIC), h_hard)
+    cal = calibrate_magnetometer(m, 0.0, 0.0, method="levelled", inclination_rad=f.inclination_rad)
+    assert cal.vertical_determined and cal.summary()["inclination_deg"] == pytest.approx(
+        math.degrees(f.inclination_rad)
+    )
+    assert np.all(np.abs(cal.h_hard_body - h_hard) < HARD_IRON_TOL * f.total_T)
+    c = cal.apply(m)
+    inclination = np.arctan2(c[:, 2], np.hypot(c[:, 0], c[:, 1]))
+    assert abs(math.degrees(np.mean(inclination) - f.inclination_rad)) < 0.01
+    assert _heading_rms_deg(angle_diff(heading_from_magnetometer(c, 0.0, 0.0), heading)) < HEADING_RMS_TOL_DEG
+    assert cal.field_spread_after < 0.005 < 0.05 < cal.field_spread_before
+    unreferenced = calibrate_magnetometer(m, 0.0, 0.0, method="levelled")
+    assert unreferenced.h_hard_body[2] == 0.0 and not unreferenced.vertical_determined
+
+
+def test_levelled_vertical_offset_is_the_effective_one(spin, scott_reef_field) -> None:
+    """A vertical soft iron k above the horizontal one shows as k * B_down in the vertical offset
+    (the effective offset of a near-level vehicle; the module's notes), on a tilting spin too."""
+    f = scott_reef_field
+    _heading, measure = spin
+    m, h_hard, pitch, roll = measure(H_SOFT_SYMMETRIC, HARD_IRON_FRACTION)
+    cal = calibrate_magnetometer(m, pitch, roll, method="levelled", inclination_rad=f.inclination_rad)
+    S = np.eye(3) + H_SOFT_SYMMETRIC
+    k = S[2, 2] / math.sqrt(np.linalg.det(S[:2, :2])) - 1.0
+    effective = h_hard[2] + k * f.b_ned_T[2]
+    assert abs(k * f.b_ned_T[2]) > 2.0 * HARD_IRON_TOL * f.total_T  # far from the true one
+    assert abs(cal.h_hard_body[2] - effective) < 0.002 * f.total_T
+
+
+def test_field_model_error_moves_the_vertical_offset(level_spin, scott_reef_field) -> None:
+    """An error dZ in the model's vertical field moves the vertical offset by -dZ (dH = 0)."""
+    f = scott_reef_field
+    _heading, measure = level_spin
+    m = measure(_vertical_like_horizontal(H_SOFT_SYMMETRIC), HARD_IRON_FRACTION * f.total_T)
+    dz = 150e-9  # tesla: about the WMM's 1-sigma in Z
+    wrong = math.atan2(f.b_ned_T[2] + dz, f.horizontal_T)
+    h = calibrate_magnetometer(m, 0.0, 0.0, method="levelled", inclination_rad=f.inclination_rad).h_hard_body
+    h_wrong = calibrate_magnetometer(m, 0.0, 0.0, method="levelled", inclination_rad=wrong).h_hard_body
+    assert h_wrong[2] - h[2] == pytest.approx(-dz, rel=0.05)
+    np.testing.assert_allclose(h_wrong[:2], h[:2], atol=1e-9)
+
+
 def test_level_spin_warns_vertical_unobservable(scott_reef_field, caplog) -> None:
     """Without any tilt the ellipsoid fit cannot separate the vertical offset: it says so."""
     f = scott_reef_field
@@ -181,9 +253,12 @@ def test_nan_samples_are_dropped_with_a_warning(spin, caplog) -> None:
 
 
 def test_calibration_summary_and_validation() -> None:
-    cal = MagnetometerCalibration(np.zeros(3), np.eye(3), 0.2, 0.001, "levelled", 100)
+    cal = MagnetometerCalibration(np.zeros(3), np.eye(3), 0.2, 0.001, 0.3, 0.002, "levelled", 100)
     s = cal.summary()
     assert s["field_spread_before_pct"] == pytest.approx(20.0) and s["method"] == "levelled"
+    assert s["horizontal_spread_after_pct"] == pytest.approx(0.2) and s["inclination_deg"] is None
     np.testing.assert_allclose(cal.apply([[1.0, 2.0, 3.0]]), [[1.0, 2.0, 3.0]])
     with pytest.raises(ValueError, match="A_soft"):
-        MagnetometerCalibration(np.zeros(3), np.eye(2), 0.2, 0.001, "levelled", 100)
+        MagnetometerCalibration(np.zeros(3), np.eye(2), 0.2, 0.001, 0.3, 0.002, "levelled", 100)
+    with pytest.raises(ValueError, match="inclination_rad"):
+        MagnetometerCalibration(np.zeros(3), np.eye(3), 0.2, 0.001, 0.3, 0.002, "levelled", 100, 2.0)

@@ -3,10 +3,14 @@ magnetometer, and the heading it gives against the logged compass and, in simula
 
 The calibration is :func:`auvnav.compass.calibrate_magnetometer` on every sample of
 ``nav/magnetometer.csv`` (a spin: several full turns), levelled with the attitude's pitch and roll
-interpolated at the magnetometer's times. The calibrated heading (eq. 1) is compared with the
-compass heading as logged and, when the dive has ``truth/``, with the true magnetic heading: a
-calibration cannot see a rotation of the field about the vertical (the deviation's constant term),
-so against the truth it is scored after removing its mean offset, which is reported separately.
+interpolated at the magnetometer's times. By default its vertical is referenced to the inclination
+of the geomagnetic model (:func:`auvnav.compass.field.earth_field`) at the dive's origin and start,
+which fixes the vertical hard iron even from a level spin (what that assumes, and the 0.4% of the
+field that the model's error costs on real data, are in :mod:`auvnav.compass.magnetometer`). The
+calibrated heading (eq. 1) is compared with the compass heading as logged and, when the dive has
+``truth/``, with the true magnetic heading: a calibration cannot see a rotation of the field about
+the vertical (the deviation's constant term), so against the truth it is scored after removing its
+mean offset, which is reported separately.
 ``truth/truth.yaml`` also gives the injected hard iron, scored as a fraction of the field.
 """
 
@@ -19,6 +23,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from auvnav.compass.field import earth_field
 from auvnav.compass.magnetometer import CalibrationMethod, calibrate_magnetometer, heading_from_magnetometer
 from auvnav.dive import read_dive
 from auvnav.errors import DiveFormatError, Problem
@@ -58,7 +63,9 @@ def _true_hard_iron_nT(dive_path: Path) -> tuple[FloatArray, float] | None:
     return h, field
 
 
-def calibrate_dive(dive_path: Path, *, method: CalibrationMethod = "levelled") -> dict[str, Any]:
+def calibrate_dive(
+    dive_path: Path, *, method: CalibrationMethod = "levelled", field_model: bool = True
+) -> dict[str, Any]:
     """Calibrate a dive's magnetometer and score the heading it gives.
 
     Parameters
@@ -66,24 +73,30 @@ def calibrate_dive(dive_path: Path, *, method: CalibrationMethod = "levelled") -
     dive_path : Path
         A dive folder with ``nav/magnetometer.csv`` (a spin, ideally).
     method : {"levelled", "ellipsoid"}
-        ``"levelled"`` suits a passively stable vehicle, whose spin barely tilts: the vertical
-        offset is then unobservable and left at zero. ``"ellipsoid"`` needs several degrees of
-        pitch and roll.
+        ``"levelled"`` suits a passively stable vehicle, whose spin barely tilts. ``"ellipsoid"``
+        needs tilt well above the inclinometer's error to separate the vertical scale and offset.
+    field_model : bool
+        Reference the vertical to the geomagnetic model's inclination at the dive's origin and
+        start (``field_model`` in the summary names the model). Without it a levelled fit leaves
+        the vertical offset at zero (e.g. at a site with a known magnetic anomaly).
 
     Returns
     -------
     dict
-        :meth:`MagnetometerCalibration.summary` plus ``field_unit`` (mean calibrated magnitude, in
-        the file's unit), ``heading_vs_compass`` (``offset_deg``, ``rms_deg`` about the offset,
-        calibrated minus logged compass) and, for a simulated dive, ``truth``: ``heading_offset_deg``,
+        :meth:`MagnetometerCalibration.summary` plus ``field_model`` (the geomagnetic model's
+        name, or None), ``field_unit`` (mean calibrated magnitude, in the file's unit),
+        ``heading_vs_compass`` (``offset_deg``, ``rms_deg`` about the offset, calibrated minus
+        logged compass) and, for a simulated dive, ``truth``: ``heading_offset_deg``,
         ``heading_rms_deg`` (about the offset), ``compass_rms_deg`` (the logged compass against the
         truth, offset included) and ``hard_iron_error_pct`` (per axis, of the total field; the
-        vertical None for ``"levelled"``).
+        vertical None when the fit left it at zero).
 
     Raises
     ------
     DiveFormatError
         The dive has no magnetometer stream (one line naming the file), or is bad.
+    GeomagneticModelError
+        ``field_model`` and no model covers the dive's date.
     InsufficientDataError
         Too few samples, or samples that do not turn through all headings.
     """
@@ -102,7 +115,17 @@ def calibrate_dive(dive_path: Path, *, method: CalibrationMethod = "levelled") -
     att = dive.attitude
     pitch = np.interp(mag.t_s, att.t_s, att.pitch_rad)
     roll = _interp_angle(mag.t_s, att.t_s, att.roll_rad)
-    cal = calibrate_magnetometer(mag.m_body, pitch, roll, method=method)
+    model = None
+    if field_model:
+        origin = dive.info.origin
+        model = earth_field(origin.latitude_rad, origin.longitude_rad, dive.info.start_time_s)
+    cal = calibrate_magnetometer(
+        mag.m_body,
+        pitch,
+        roll,
+        method=method,
+        inclination_rad=None if model is None else model.inclination_rad,
+    )
     calibrated = cal.apply(mag.m_body)
     heading = heading_from_magnetometer(calibrated, pitch, roll)
     compass = _interp_angle(mag.t_s, att.t_s, att.heading_rad)
@@ -111,6 +134,7 @@ def calibrate_dive(dive_path: Path, *, method: CalibrationMethod = "levelled") -
     summary: dict[str, Any] = {
         "dive": dive_path.name,
         **cal.summary(),
+        "field_model": None if model is None else model.model,
         "field_unit": field_unit,
         "heading_vs_compass": {"offset_deg": offset, "rms_deg": rms},
         "truth": None,
@@ -137,7 +161,7 @@ def calibrate_dive(dive_path: Path, *, method: CalibrationMethod = "levelled") -
             scores["hard_iron_error_pct"] = [
                 float(error[0]),
                 float(error[1]),
-                None if method == "levelled" else float(error[2]),
+                float(error[2]) if cal.vertical_determined else None,
             ]
         summary["truth"] = scores
     return summary
@@ -147,14 +171,23 @@ def format_calibration(summary: dict[str, Any]) -> str:
     """A short human-readable account of :func:`calibrate_dive`'s summary."""
     h = summary["h_hard_body"]
     unit = summary["field_unit"]
+    reference = (
+        ""
+        if summary["field_model"] is None
+        else f", vertical referenced to {summary['field_model']} "
+        f"(inclination {summary['inclination_deg']:+.2f} deg)"
+    )
     lines = [
-        f"{summary['dive']}: {summary['method']} calibration of {summary['n_samples']} magnetometer samples",
+        f"{summary['dive']}: {summary['method']} calibration of {summary['n_samples']} magnetometer "
+        f"samples{reference}",
         "  hard iron   [{}] ({} of the field)".format(
             ", ".join(f"{v:.4g}" for v in h), ", ".join(f"{100 * v / unit:+.2f}%" for v in h)
         ),
         "  soft iron   " + "; ".join(" ".join(f"{v:+.4f}" for v in row) for row in summary["A_soft"]),
         f"  field spread {summary['field_spread_before_pct']:.2f}% before, "
-        f"{summary['field_spread_after_pct']:.3f}% after",
+        f"{summary['field_spread_after_pct']:.3f}% after (levelled horizontal "
+        f"{summary['horizontal_spread_before_pct']:.2f}% -> "
+        f"{summary['horizontal_spread_after_pct']:.3f}%)",
         f"  calibrated minus logged compass: offset {summary['heading_vs_compass']['offset_deg']:+.2f} deg, "
         f"RMS {summary['heading_vs_compass']['rms_deg']:.2f} deg about it",
     ]

@@ -578,6 +578,7 @@ def fix_constant(
     weights: ArrayLike | None = None,
     *,
     heading_weights: Sequence[ArrayLike] | None = None,
+    common_sigma_rad: float = 0.0,
 ) -> DeviationModel:
     """Fix the constant ``a0`` from sub-sea transits, holding the shape (paper sec. III.B, Fig. 5b).
 
@@ -607,6 +608,10 @@ def fix_constant(
     heading_weights : sequence of T arrays, optional
         Weight of each heading along its transit (normalised per transit), e.g. the projections
         ``w_j`` above.
+    common_sigma_rad : float
+        1-sigma of an error shared by every transit, radians: the yaw misalignment between the
+        DVL and the compass turns every dead-reckoned course alike, so the transits cannot tell it
+        from ``a0``; the transits' scatter does not show it either. Added to ``a0``'s variance.
 
     Returns
     -------
@@ -614,7 +619,8 @@ def fix_constant(
         Same harmonics, new ``a0``, ``constant_source="gps-transits"``. Its covariance holds the
         shape's covariance and, for ``a0``, the weighted scatter of the transits about the fit
         (variance of a weighted mean, unknown variance factor) plus the shape's propagated
-        uncertainty; the shape block is taken as exact when ``model`` has no covariance.
+        uncertainty and ``common_sigma_rad`` squared; the shape block is taken as exact when
+        ``model`` has no covariance.
 
     Raises
     ------
@@ -630,6 +636,8 @@ def fix_constant(
         raise ValueError("transit course differences and weights must be finite")
     if np.any(w <= 0):
         raise ValueError("transit weights must be positive")
+    if not (math.isfinite(common_sigma_rad) and common_sigma_rad >= 0.0):
+        raise ValueError(f"common_sigma_rad must be finite and non-negative; found {common_sigma_rad}")
     if y.size < 2:
         raise InsufficientDataError(f"fixing the compass constant needs at least 2 transits; got {y.size}")
     shape = phi @ model.coefficients_rad[1:]
@@ -645,7 +653,7 @@ def fix_constant(
         log.warning("fix_constant: the model has no covariance; its shape is taken as exact")
     cov = np.zeros((p, p))
     cov[1:, 1:] = C_shape
-    cov[0, 0] = var_data + g @ C_shape @ g
+    cov[0, 0] = var_data + g @ C_shape @ g + common_sigma_rad**2
     cov[0, 1:] = cov[1:, 0] = -C_shape @ g
     log.info(
         "compass constant from %d transits: %.3f +- %.3f deg (transit residual RMS %.3f deg)",

@@ -13,14 +13,17 @@ Several dives are pooled. The robust least-squares fit is :func:`auvnav.compass.
 
 **Constant.** A relative reference (SLAM) leaves the constant ``a0`` arbitrary. Each dive given as
 a transit is dead-reckoned with the *uncorrected* compass (declination applied,
-:func:`auvnav.nav.nav_inputs`), its sub-sea legs between GPS fixes give the GPS course made good
+:func:`auvnav.nav.nav_inputs`), its sub-sea legs between GPS fixes (each surface stay's fixes
+smoothed through the dead reckoning, :func:`smooth_surface_fixes`) give the GPS course made good
 minus the dead-reckoned course (:func:`auvnav.nav.course_made_good`), and
 :func:`auvnav.compass.fix_constant` fixes ``a0`` with the shape held, each leg weighted by its
-inverse course variance. A leg is used when it is long (:data:`MIN_LEG_M`) and straight (its
-dead-reckoned displacement at least :data:`MIN_STRAIGHTNESS` of its path); what it measures is the
-correction along it, each heading weighted by its step's projection on the course (a dog-leg back
-to the start of a line counts against it). The same dive may be both a reference dive and a transit:
-the paper's future work, shape and constant from one dive that includes long legs between fixes.
+inverse course variance. The constant's uncertainty adds the DVL's yaw misalignment to the
+compass (:data:`DVL_YAW_SIGMA_DEG`), which turns every leg alike. A leg is used when it is long
+(:data:`MIN_LEG_M`) and straight (its dead-reckoned displacement at least :data:`MIN_STRAIGHTNESS`
+of its path); what it measures is the correction along it, each heading weighted by its step's
+projection on the course (a dog-leg back to the start of a line counts against it). The same dive
+may be both a reference dive and a transit: the paper's future work, shape and constant from one
+dive that includes long legs between fixes.
 """
 
 from __future__ import annotations
@@ -39,10 +42,11 @@ from numpy.typing import NDArray
 from auvnav.compass.correction import FitRecord
 from auvnav.compass.deviation import DeviationFit, fit_deviation, fix_constant, transit_deviation
 from auvnav.compass.field import true2magnetic
-from auvnav.dive import Dive, read_dive
+from auvnav.dive import Dive, GpsStream, read_dive
 from auvnav.errors import ConfigError, DiveFormatError, InsufficientDataError, Problem
-from auvnav.frames import FloatArray, rot2euler, wrap_angle
+from auvnav.frames import FloatArray, geodetic2ned, ned2geodetic, rot2euler, wrap_angle
 from auvnav.nav import TransitLeg, course_made_good, dead_reckon, declination, nav_inputs
+from auvnav.nav.inputs import SURFACE_GAP_S
 from auvnav.trajectory import Trajectory, read_trajectory
 
 log = logging.getLogger(__name__)
@@ -72,6 +76,15 @@ TURN_RATE_WINDOW_S = 2.0
 MIN_LEG_M = 100.0
 #: A leg is used when its dead-reckoned displacement is at least this fraction of its path.
 MIN_STRAIGHTNESS = 0.8
+#: Fewest GPS fixes of a surface stay for the straight-line fit of :func:`smooth_surface_fixes`.
+MIN_STAY_FIXES = 3
+#: 1-sigma yaw misalignment between the DVL and the compass, degrees. It turns every dead-reckoned
+#: course alike, so transits measure it together with the constant (for dead reckoning with the
+#: same DVL that is what is wanted; as the compass's own constant it is an error the legs' scatter
+#: cannot show). vehicle.yaml does not record it; 0.1 degree is a careful installation's residual,
+#: the simulator's figure (``auvnav.sim.sensors``), not a datasheet's. A DVL never aligned in situ
+#: can be off by a degree or more: give the vehicle's own figure to :func:`fit_compass`.
+DVL_YAW_SIGMA_DEG = 0.1
 
 ReferenceName = Literal["truth", "slam"]
 
@@ -308,11 +321,75 @@ class TransitUse:
         return float(np.angle(np.sum(w * np.exp(1j * self.compass_heading_rad))))
 
 
+def smooth_surface_fixes(dive: Dive, dr: Trajectory, *, min_gap_s: float = SURFACE_GAP_S) -> Dive:
+    """The dive with the GPS fixes of each surface stay smoothed through its dead reckoning.
+
+    A leg's course made good rests on the fixes at its two ends: one fix of 3 m at each end of a
+    2 km leg is 0.12 degrees of course noise, as much as the constant's whole budget. Every fix of
+    a stay (fixes less than ``min_gap_s`` apart) measures the offset of the dead-reckoned antenna
+    position from the truth; a straight line in time fitted to a stay's offsets (so a steady drift
+    the dead reckoning misses, such as a surface current without bottom lock, is followed rather
+    than averaged away) and added back to the dead reckoning gives each smoothed fix, with the
+    line's 1-sigma at its time, ``sigma * sqrt(1/n + (t - t_mean)^2 / S_tt)``. That assumes fix errors
+    independent from second to second; a real receiver's are correlated over a minute or more, so
+    it gains less than the sigma says, but the constant's uncertainty comes from the legs' scatter
+    (:func:`auvnav.compass.fix_constant`) and leans on these sigmas only for relative weights.
+    Stays of fewer than :data:`MIN_STAY_FIXES` fixes, and fixes outside the track, are kept as they are.
+
+    Parameters
+    ----------
+    dive : Dive
+        With GPS fixes (else returned as it is).
+    dr : Trajectory
+        Its dead-reckoned track, local NED about the dive's origin.
+    min_gap_s : float
+        Fixes further apart than this belong to different stays, seconds.
+
+    Returns
+    -------
+    Dive
+        A copy with the smoothed GPS stream.
+    """
+    gps = dive.gps
+    if gps is None or len(gps) == 0:
+        return dive
+    origin = dive.info.origin
+    antenna = geodetic2ned(gps.latitude_rad, gps.longitude_rad, np.zeros(len(gps)), origin)
+    sigma = gps.sigma_m.copy()
+    on_track = (gps.t_s >= dr.t_s[0]) & (gps.t_s <= dr.t_s[-1])
+    smoothed = np.zeros(len(gps), dtype=bool)
+    stay = np.concatenate([[0], np.cumsum(np.diff(gps.t_s) > min_gap_s)])
+    for k in np.unique(stay[on_track]):
+        rows = np.flatnonzero((stay == k) & on_track)
+        if rows.size < MIN_STAY_FIXES:
+            continue
+        t = gps.t_s[rows]
+        at = dr.interpolate(t)
+        predicted = (
+            at.p_ned_m[:, :2]
+            + np.einsum("nij,j->ni", at.R_ned_body, dive.vehicle.gps.lever_arm_body_m)[:, :2]
+        )
+        dt = t - t.mean()
+        s_tt = float(dt @ dt)
+        design = np.column_stack([np.ones_like(dt), dt])
+        line, *_ = np.linalg.lstsq(design, antenna[rows, :2] - predicted, rcond=None)
+        antenna[rows, :2] = predicted + design @ line
+        sigma[rows] *= np.sqrt(1.0 / rows.size + (dt**2 / s_tt if s_tt > 0 else 0.0))
+        smoothed[rows] = True
+    latitude, longitude = gps.latitude_rad.copy(), gps.longitude_rad.copy()
+    if smoothed.any():
+        lat, lon, _ = ned2geodetic(antenna[smoothed], origin)
+        latitude[smoothed], longitude[smoothed] = np.reshape(lat, -1), np.reshape(lon, -1)
+    stream = GpsStream(t_s=gps.t_s, latitude_rad=latitude, longitude_rad=longitude, sigma_m=sigma)
+    return dataclasses.replace(dive, gps=stream)
+
+
 def transit_legs(dive: Dive) -> list[TransitUse]:
     """The sub-sea legs of a dive with what each measures of the compass correction.
 
     The dive is dead-reckoned with the uncorrected compass (declination applied); each leg between
-    GPS fixes gives ``course_error_rad = CMG - DR course``, the correction ``delta`` along it.
+    GPS fixes (smoothed over each surface stay, :func:`smooth_surface_fixes`) gives
+    ``course_error_rad = CMG - DR course``, the correction ``delta`` along it.
 
     Parameters
     ----------
@@ -328,7 +405,7 @@ def transit_legs(dive: Dive) -> list[TransitUse]:
     inputs = nav_inputs(dive)
     dr = dead_reckon(inputs)
     uses = []
-    for leg in course_made_good(dive, dr):
+    for leg in course_made_good(smooth_surface_fixes(dive, dr), dr):
         idx = np.flatnonzero((inputs.t_s >= leg.t_start_s) & (inputs.t_s <= leg.t_end_s))
         if idx.size < 2:
             uses.append(TransitUse(name, leg, np.zeros(0), np.zeros(0), 0.0, "no dead-reckoned samples"))
@@ -375,6 +452,8 @@ class CompassFit:
     transit_residuals_rad : ndarray, shape (L,), or None
         Residual of each used leg about the final correction (course error minus what the
         correction predicts along the leg), radians.
+    dvl_yaw_sigma_rad : float
+        The DVL's yaw misalignment 1-sigma included in the constant's uncertainty, radians.
     """
 
     fit: DeviationFit
@@ -383,6 +462,7 @@ class CompassFit:
     legs: tuple[TransitUse, ...] = ()
     transit_dives: tuple[str, ...] = ()
     transit_residuals_rad: FloatArray | None = None
+    dvl_yaw_sigma_rad: float = 0.0
 
     def __post_init__(self) -> None:
         if self.transit_residuals_rad is not None and len(self.transit_residuals_rad) != len(self.used_legs):
@@ -426,6 +506,7 @@ class CompassFit:
             "constant": {
                 "source": model.constant_source,
                 "sigma_deg": None if cov is None else math.degrees(math.sqrt(cov[0, 0])),
+                "dvl_yaw_sigma_deg": math.degrees(self.dvl_yaw_sigma_rad) if self.transit_dives else None,
                 "legs": len(self.used_legs) if self.transit_dives else None,
                 "transit_rms_deg": None if rms is None else math.degrees(rms),
                 "dives": list(self.transit_dives),
@@ -458,6 +539,7 @@ def fit_compass(
     rate_hz: float = PAIR_RATE_HZ,
     min_depth_m: float = MIN_DEPTH_M,
     max_turn_rate_rad_s: float = math.radians(MAX_TURN_RATE_DEG_S),
+    dvl_yaw_sigma_rad: float = math.radians(DVL_YAW_SIGMA_DEG),
 ) -> CompassFit:
     """Fit the compass correction from dives against a reference; fix its constant from transits.
 
@@ -475,6 +557,9 @@ def fit_compass(
         N of eq. 5.
     rate_hz, min_depth_m, max_turn_rate_rad_s
         Pair selection (:func:`heading_pairs`).
+    dvl_yaw_sigma_rad : float
+        1-sigma of the DVL's yaw misalignment to the compass (:data:`DVL_YAW_SIGMA_DEG`), added
+        to the transit constant's uncertainty, radians.
 
     Returns
     -------
@@ -536,6 +621,7 @@ def fit_compass(
         y,
         weights=1.0 / np.array([u.leg.course_sigma_rad for u in used]) ** 2,
         heading_weights=weights,
+        common_sigma_rad=dvl_yaw_sigma_rad,
     )
     return CompassFit(
         fit=dataclasses.replace(fit, model=model),
@@ -544,6 +630,7 @@ def fit_compass(
         legs=legs,
         transit_dives=tuple(_dive_name(load(path)) for path in transits),
         transit_residuals_rad=wrap_angle(y - transit_deviation(model, headings, weights)),
+        dvl_yaw_sigma_rad=dvl_yaw_sigma_rad,
     )
 
 
@@ -569,7 +656,8 @@ def format_fit_summary(summary: dict[str, Any]) -> str:
     sigma = "" if c["sigma_deg"] is None else f" +- {c['sigma_deg']:.3f} deg"
     if c["source"] == "gps-transits":
         lines.append(
-            f"constant from GPS course made good: {c['legs']} legs of {', '.join(c['dives'])}{sigma}, "
+            f"constant from GPS course made good: {c['legs']} legs of {', '.join(c['dives'])}{sigma} "
+            f"(with {c['dvl_yaw_sigma_deg']:.2f} deg for the DVL's yaw mounting), "
             f"leg residual RMS {c['transit_rms_deg']:.3f} deg"
         )
     elif c["source"] == "truth":

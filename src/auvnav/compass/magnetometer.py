@@ -16,14 +16,38 @@ on an ellipsoid centred on the hard-iron offset (a sphere without soft iron). Tw
   vertical component and a constant horizontal magnitude, as the Earth field does (the magnitude
   and dot-product invariants of Li and Li, "A new calibration method for tri-axial field sensors
   in strap-down navigation systems", Meas. Sci. Technol. 23, 105105, 2012,
-  doi:10.1088/0957-0233/23/10/105105). Using the attitude makes the vertical axis observable from
-  the degree or two of tilt a passively stable vehicle has, where a magnitude-only ellipsoid fit
-  is ill-conditioned (tens of percent of error in the vertical offset at 0.1% noise). A rotation about the
+  doi:10.1088/0957-0233/23/10/105105). The vertical scale and offset are told apart only by tilt
+  that changes the body's vertical field by much more than the inclinometer's error: tens of
+  degrees of pitch and roll, or a few degrees measured to a few hundredths. A rotation about the
   vertical remains unobservable: it is a constant heading offset, the deviation's constant term,
   and is fixed by keeping the horizontal block of ``A_soft`` symmetric.
 - ``"levelled"``: for a passively stable vehicle (small pitch and roll, the paper's case), the samples
   are levelled with pitch and roll and a two-dimensional ellipse is fitted to the horizontal
-  components; the vertical axis keeps its raw offset and scale, which near-level heading barely sees.
+  components (hard iron x, y and the horizontal soft iron); the vertical row of ``A_soft`` then
+  makes the levelled vertical component constant.
+
+**The vertical offset from a level spin.** A spin that barely tilts cannot see the vertical offset
+from the shape of the data: the body's vertical field is then the constant ``Z`` of the Earth field,
+so any vertical offset just moves the constant. Given the field's inclination ``I`` at the site and
+date from the geomagnetic model (:func:`auvnav.compass.field.earth_field`), it is fixed by requiring
+the calibrated, levelled field to have the model's direction: vertical component ``tan(I)`` times
+the horizontal magnitude, i.e. ``Z = B_down`` and ``|l_xy| = H`` in the model's proportion (only the
+ratio is used, so the magnetometer's unit does not matter). The assumptions and what they cost:
+
+- the model's field is the local field. The WMM error model puts its 1-sigma error at about
+  130 nT in ``H`` and 160 nT in ``Z`` worldwide (Chulliat et al., "The US/UK World Magnetic Model
+  for 2020-2025", NOAA technical report, 2020, section 3; crustal anomalies, which no main-field
+  model holds, are most of it). Errors ``dZ`` in ``B_down`` and ``dH`` in ``H`` change the vertical
+  offset by ``tan(I) dH - dZ``: about 200 nT, 0.4% of a 48,000 nT field at an inclination of
+  45 degrees, which is the floor of this method on real data (in simulation the model *is* the
+  field, so the floor is zero);
+- the vertical soft iron equals the horizontal mean (the fit keeps both in the raw scale:
+  ``A_soft[2, 2] = 1`` and the horizontal block has unit determinant): a level spin sees the
+  offset plus the soft iron's response to the constant vertical field, so an excess vertical soft
+  iron ``k`` (``(H_soft + I)[2, 2]`` over the horizontal block's geometric-mean scale, minus one)
+  shows as ``k * B_down`` in the vertical offset. That sum is the *effective* vertical offset of a
+  near-level vehicle, and it is what its heading needs (the horizontal offsets likewise include
+  ``H_soft[:2, 2] * B_down``); only tilt of tens of degrees (``"ellipsoid"``) separates the parts.
 
 Frames: body = FRD; the level frame is the body frame rotated by ``Ry(pitch) @ Rx(roll)`` (the part of
 ``R_ned_body = Rz(yaw) @ Ry(pitch) @ Rx(roll)`` that excludes yaw), so its x axis points along the
@@ -163,27 +187,37 @@ class MagnetometerCalibration:
     Parameters
     ----------
     h_hard_body : ndarray, shape (3,), unit of the samples, body FRD
-        Hard-iron offset (the ellipsoid's centre). For ``"levelled"``, the effective horizontal
-        offset of a near-level vehicle (hard iron plus the soft iron's response to the vertical
-        field, which is constant when level) and a zero vertical component.
+        Hard-iron offset (the ellipsoid's centre). For ``"levelled"``, the effective offset of a
+        near-level vehicle: hard iron plus the soft iron's response to the vertical field, which is
+        constant when level (see the module's notes); its vertical component is zero when no
+        inclination was given.
     A_soft : ndarray, shape (3, 3), dimensionless
         Maps measured-minus-offset to the calibrated field, an estimate of ``(H_soft + I)^-1`` up to
-        an overall scale (chosen so the calibrated magnitude is the geometric-mean radius of the
-        fitted ellipsoid or ellipse) and a rotation about the vertical.
+        an overall scale (unit determinant for ``"ellipsoid"``; for ``"levelled"``, a horizontal
+        block of unit determinant and ``A_soft[2, 2] = 1``) and a rotation about the vertical.
     field_spread_before, field_spread_after : float, dimensionless
-        Standard deviation over mean of the magnitude the method makes constant (total field for
-        ``"ellipsoid"``, level-frame horizontal field for ``"levelled"``), raw and calibrated.
+        Standard deviation over mean of the total field magnitude, raw and calibrated (body frame:
+        no attitude enters it).
+    horizontal_spread_before, horizontal_spread_after : float, dimensionless
+        The same for the horizontal magnitude of the field levelled with the measured pitch and
+        roll (what heading uses; it also carries the inclinometer's error).
     method : {"ellipsoid", "levelled"}
     n_samples : int
         Samples used (0 for a calibration made by hand).
+    inclination_rad : float or None
+        The field inclination the vertical was referenced to (from a geomagnetic model), radians;
+        None when the fit had none.
     """
 
     h_hard_body: FloatArray
     A_soft: FloatArray
     field_spread_before: float
     field_spread_after: float
+    horizontal_spread_before: float
+    horizontal_spread_after: float
     method: CalibrationMethod
     n_samples: int = 0
+    inclination_rad: float | None = None
 
     def __post_init__(self) -> None:
         h = np.array(self.h_hard_body, dtype=float)
@@ -194,10 +228,17 @@ class MagnetometerCalibration:
             raise ValueError("h_hard_body and A_soft must be finite")
         if self.method not in _MIN_SAMPLES:
             raise ValueError(f"method must be one of {sorted(_MIN_SAMPLES)}; found {self.method!r}")
+        if self.inclination_rad is not None and not abs(self.inclination_rad) < math.pi / 2:
+            raise ValueError(f"inclination_rad must be in (-pi/2, pi/2); found {self.inclination_rad}")
         for a in (h, A):
             a.setflags(write=False)
         object.__setattr__(self, "h_hard_body", h)
         object.__setattr__(self, "A_soft", A)
+
+    @property
+    def vertical_determined(self) -> bool:
+        """Whether the vertical offset was estimated (ellipsoid, or referenced to an inclination)."""
+        return self.method == "ellipsoid" or self.inclination_rad is not None
 
     def apply(self, m_body: ArrayLike) -> FloatArray:
         """Calibrated field ``A_soft @ (m - h_hard)``; shape (..., 3), body FRD."""
@@ -210,8 +251,11 @@ class MagnetometerCalibration:
             "n_samples": self.n_samples,
             "h_hard_body": self.h_hard_body.tolist(),
             "A_soft": self.A_soft.tolist(),
+            "inclination_deg": None if self.inclination_rad is None else math.degrees(self.inclination_rad),
             "field_spread_before_pct": 100.0 * self.field_spread_before,
             "field_spread_after_pct": 100.0 * self.field_spread_after,
+            "horizontal_spread_before_pct": 100.0 * self.horizontal_spread_before,
+            "horizontal_spread_after_pct": 100.0 * self.horizontal_spread_after,
         }
 
 
@@ -219,6 +263,11 @@ def _relative_spread(v: FloatArray) -> float:
     """Standard deviation over mean of the row norms of ``v``."""
     norm = np.linalg.norm(v, axis=-1)
     return float(np.std(norm) / np.mean(norm))
+
+
+def _level(R_level_body: FloatArray, v: FloatArray) -> FloatArray:
+    """Body vectors ``v`` (N, 3) in the level frame."""
+    return np.einsum("nij,nj->ni", R_level_body, v)
 
 
 def _fit_ellipse(x: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -248,46 +297,89 @@ def _sqrtm_spd(M: FloatArray) -> FloatArray:
     return (V * np.sqrt(w)) @ V.T
 
 
-def _fit_levelled(m: FloatArray, R_level_body: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Hard-iron offset and soft-iron matrix from the ellipse of the levelled horizontal field."""
-    level_xy = (R_level_body @ m[:, :, None])[:, :2, 0]
-    centre_xy, M = _fit_ellipse(level_xy)
+def _fit_vertical(
+    m: FloatArray, R_level_body: FloatArray, h_xy: FloatArray, A_xy: FloatArray, tan_inclination: float | None
+) -> tuple[float, FloatArray]:
+    """The vertical offset and the vertical row of ``A`` given the horizontal calibration.
+
+    The calibrated vertical is ``m_z - h_z - g . c_xy`` (``c_xy`` the calibrated horizontal: ``g``
+    is the vertical axis's response to the horizontal field); ``g`` makes the levelled vertical
+    component constant. With ``tan_inclination`` that constant is ``tan(I)`` times the levelled
+    horizontal magnitude, which fixes ``h_z``; without, ``h_z`` stays zero. Returns ``h_z`` and
+    the row ``A[2]``.
+    """
+    c_xy = (m[:, :2] - h_xy) @ A_xy.T
+    r0 = float(np.mean(np.hypot(c_xy[:, 0], c_xy[:, 1])))  # the unit: horizontal field
+    c_xy, m_z = c_xy / r0, m[:, 2] / r0
+    referenced = tan_inclination is not None
+
+    def residuals(p: FloatArray) -> FloatArray:
+        h_z = p[2] if referenced else 0.0
+        level = _level(R_level_body, np.column_stack([c_xy, m_z - h_z - c_xy @ p[:2]]))
+        target = tan_inclination * np.hypot(level[:, 0], level[:, 1]) if referenced else p[2]
+        return level[:, 2] - target
+
+    p0 = np.array([0.0, 0.0, np.mean(m_z) - tan_inclination if referenced else np.mean(m_z)])
+    p = least_squares(residuals, p0, method="lm", x_scale="jac").x
+    return (float(p[2]) * r0 if referenced else 0.0), np.concatenate([-p[:2] @ A_xy, [1.0]])
+
+
+def _fit_levelled(
+    m: FloatArray, R_level_body: FloatArray, tan_inclination: float | None
+) -> tuple[FloatArray, FloatArray]:
+    """Hard-iron offset and soft-iron matrix from the ellipse of the levelled horizontal field.
+
+    With an inclination, the horizontal fit is repeated once the vertical offset is known, so the
+    levelled horizontal field no longer carries the offset's share through pitch and roll.
+    """
+    h = np.zeros(3)
     A = np.eye(3)
-    A[:2, :2] = _sqrtm_spd(M) * np.linalg.det(M) ** (-1.0 / 4.0)  # unit determinant
-    return np.array([centre_xy[0], centre_xy[1], 0.0]), A
+    for _ in range(2 if tan_inclination is not None else 1):
+        level_xy = _level(R_level_body, m - [0.0, 0.0, h[2]])[:, :2]
+        centre_xy, M = _fit_ellipse(level_xy)
+        A[:2, :2] = _sqrtm_spd(M) * np.linalg.det(M) ** (-1.0 / 4.0)  # unit determinant
+        h[:2] = centre_xy
+        h[2], A[2] = _fit_vertical(m, R_level_body, h[:2], A[:2, :2], tan_inclination)
+    return h, A
 
 
-def _unpack(p: FloatArray) -> tuple[FloatArray, FloatArray, float]:
-    """``A`` (symmetric upper-left 2x2 block: no rotation about the vertical), ``h`` and ``Z``."""
-    a00, a01, a02, a11, a12, a20, a21, a22, hx, hy, hz, z = p
+_A_INDEX = ([0, 0, 0, 1, 1, 2, 2, 2], [0, 1, 2, 1, 2, 0, 1, 2])
+
+
+def _unpack(p: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``A`` (symmetric upper-left 2x2 block: no rotation about the vertical) and ``h``."""
+    a00, a01, a02, a11, a12, a20, a21, a22, hx, hy, hz = p[:11]
     A = np.array([[a00, a01, a02], [a01, a11, a12], [a20, a21, a22]])
-    return A, np.array([hx, hy, hz]), z
+    return A, np.array([hx, hy, hz])
 
 
 def _fit_ellipsoid(
-    m: FloatArray, R_level_body: FloatArray, h0: FloatArray, A0: FloatArray
+    m: FloatArray, R_level_body: FloatArray, h0: FloatArray, A0: FloatArray, tan_inclination: float | None
 ) -> tuple[FloatArray, FloatArray, float]:
     """Refine ``(h, A)`` so the levelled calibrated field has constant horizontal and vertical parts.
 
     Residuals, in units of the horizontal field: ``l_z - Z`` and ``|l_xy| - 1`` with
-    ``l = R_level_body A (m - h)``. Returns ``h``, ``A`` (unit determinant) and the 1-sigma of the
-    vertical offset as a fraction of the field.
+    ``l = R_level_body A (m - h)``; ``Z`` is ``tan_inclination`` when given, else estimated.
+    Returns ``h``, ``A`` (unit determinant) and the 1-sigma of the vertical offset as a fraction
+    of the field.
     """
-    level0 = (R_level_body @ ((m - h0) @ A0.T)[:, :, None])[:, :, 0]
+    level0 = _level(R_level_body, (m - h0) @ A0.T)
     r0 = float(np.mean(np.hypot(level0[:, 0], level0[:, 1])))  # the unit: horizontal field
     u = m / r0
 
     def residuals(p: FloatArray) -> FloatArray:
-        A, h, z = _unpack(p)
-        level = (R_level_body @ ((u - h) @ A.T)[:, :, None])[:, :, 0]
+        A, h = _unpack(p)
+        z = tan_inclination if tan_inclination is not None else p[11]
+        level = _level(R_level_body, (u - h) @ A.T)
         return np.concatenate([level[:, 2] - z, np.hypot(level[:, 0], level[:, 1]) - 1.0])
 
-    p0 = np.concatenate(
-        [A0[[0, 0, 0, 1, 1, 2, 2, 2], [0, 1, 2, 1, 2, 0, 1, 2]], h0 / r0, [np.mean(level0[:, 2]) / r0]]
-    )
+    p0 = np.concatenate([A0[_A_INDEX], h0 / r0])
+    if tan_inclination is None:
+        p0 = np.append(p0, np.mean(level0[:, 2]) / r0)
     sol = least_squares(residuals, p0, method="lm", x_scale="jac", xtol=1e-12, ftol=1e-12)
     log.debug("ellipsoid fit: %s after %d evaluations", sol.message, sol.nfev)
-    A, h, z = _unpack(sol.x)
+    A, h = _unpack(sol.x)
+    z = tan_inclination if tan_inclination is not None else sol.x[11]
     dof = max(sol.fun.size - sol.x.size, 1)
     try:
         var_hz = np.linalg.inv(sol.jac.T @ sol.jac)[10, 10] * (sol.fun @ sol.fun) / dof
@@ -304,6 +396,7 @@ def calibrate_magnetometer(
     roll_rad: ArrayLike,
     *,
     method: CalibrationMethod = "ellipsoid",
+    inclination_rad: float | None = None,
 ) -> MagnetometerCalibration:
     """Hard- and soft-iron calibration from raw magnetometer samples taken while turning.
 
@@ -314,10 +407,19 @@ def calibrate_magnetometer(
     pitch_rad, roll_rad : array_like, shape (N,) or scalar, radians
         Measured attitude at each sample, used to level the calibrated field.
     method : {"ellipsoid", "levelled"}
-        ``"ellipsoid"``: full 3D fit; its vertical axis needs some tilt (a degree or two suffices
-        with low noise; a warning says when the vertical offset is uncertain beyond 1% of the
-        field). ``"levelled"``: 2D fit of the levelled horizontal field for a passively
-        stable vehicle; the vertical offset is left at zero.
+        ``"ellipsoid"``: full 3D fit; its vertical axis needs tilt well above the inclinometer's
+        error (a warning says when the vertical offset's formal 1-sigma exceeds 1% of the field;
+        that figure ignores the error of the measured pitch and roll, which biases the vertical
+        scale and offset of a barely tilting spin by far more).
+        ``"levelled"``: 2D fit of the levelled horizontal field for a passively stable vehicle,
+        and the vertical from ``inclination_rad``.
+    inclination_rad : float, optional
+        The Earth field's inclination at the site and date (down positive, radians), from a
+        geomagnetic model (:attr:`auvnav.compass.field.EarthField.inclination_rad`). The levelled
+        calibrated field is made to point at it, which fixes the vertical offset even from a level
+        spin (see the module's notes for what this assumes); without it ``"levelled"`` leaves the
+        vertical offset at zero. ``"ellipsoid"`` holds its levelled vertical component at it
+        instead of estimating it.
 
     Returns
     -------
@@ -331,6 +433,8 @@ def calibrate_magnetometer(
     """
     if method not in _MIN_SAMPLES:
         raise ValueError(f"method must be one of {sorted(_MIN_SAMPLES)}; found {method!r}")
+    if inclination_rad is not None and not abs(inclination_rad) < math.pi / 2:
+        raise ValueError(f"inclination_rad must be in (-pi/2, pi/2); found {inclination_rad}")
     m = _vectors("m_body", m_body)
     if m.ndim != 2:
         raise ValueError(f"m_body must have shape (N, 3); found {m.shape}")
@@ -346,32 +450,36 @@ def calibrate_magnetometer(
             f"{method} magnetometer calibration needs at least {_MIN_SAMPLES[method]} samples; got {len(m)}"
         )
     R_level_body = level_rotation(pitch, roll)
-    h_hard, A = _fit_levelled(m, R_level_body)
+    tan_inclination = None if inclination_rad is None else math.tan(inclination_rad)
+    h_hard, A = _fit_levelled(m, R_level_body, tan_inclination)
     if method == "ellipsoid":
-        h_hard, A, sigma_hz = _fit_ellipsoid(m, R_level_body, h_hard, A)
+        h_hard, A, sigma_hz = _fit_ellipsoid(m, R_level_body, h_hard, A, tan_inclination)
         if sigma_hz > _MAX_SIGMA_VERTICAL:
             log.warning(
                 "the vertical hard-iron offset is poorly determined (1-sigma %.1f%% of the field): "
-                "the samples need more pitch and roll, or use method='levelled'",
+                "the samples need more pitch and roll, or use method='levelled' with the inclination",
                 100.0 * sigma_hz,
             )
-        before = _relative_spread(m)
-        after = _relative_spread((m - h_hard) @ A.T)
-    else:
-        before = _relative_spread((R_level_body @ m[:, :, None])[:, :2, 0])
-        after = _relative_spread((R_level_body @ ((m - h_hard) @ A.T)[:, :, None])[:, :2, 0])
-    log.info(
-        "%s magnetometer calibration of %d samples: field spread %.2f%% -> %.2f%%",
-        method,
-        len(m),
-        100.0 * before,
-        100.0 * after,
-    )
-    return MagnetometerCalibration(
+    calibrated = (m - h_hard) @ A.T
+    cal = MagnetometerCalibration(
         h_hard_body=h_hard,
         A_soft=A,
-        field_spread_before=before,
-        field_spread_after=after,
+        field_spread_before=_relative_spread(m),
+        field_spread_after=_relative_spread(calibrated),
+        horizontal_spread_before=_relative_spread(_level(R_level_body, m)[:, :2]),
+        horizontal_spread_after=_relative_spread(_level(R_level_body, calibrated)[:, :2]),
         method=method,
         n_samples=len(m),
+        inclination_rad=inclination_rad,
     )
+    log.info(
+        "%s magnetometer calibration of %d samples: field spread %.2f%% -> %.3f%% "
+        "(horizontal %.2f%% -> %.3f%%)",
+        method,
+        len(m),
+        100.0 * cal.field_spread_before,
+        100.0 * cal.field_spread_after,
+        100.0 * cal.horizontal_spread_before,
+        100.0 * cal.horizontal_spread_after,
+    )
+    return cal
