@@ -16,7 +16,7 @@ from auvnav.vision.candidates import (
     overlap_distance,
     overlap_probability,
 )
-from auvnav.vision.features import match_candidates, match_descriptors
+from auvnav.vision.features import match_descriptors
 from auvnav.vision.registration import Registration, RegistrationSettings, _expm_so3, register
 from auvnav.vision.stereo import StereoFeatures
 
@@ -25,7 +25,7 @@ def _descriptors(rng: np.random.Generator, n: int) -> np.ndarray:
     return rng.integers(0, 120, (n, 128)).astype(np.uint8)
 
 
-def test_matching_recovers_a_permutation_and_respects_candidates() -> None:
+def test_matching_recovers_a_permutation_and_drops_ambiguous_matches() -> None:
     rng = np.random.default_rng(0)
     a = _descriptors(rng, 200)
     perm = rng.permutation(200)
@@ -33,14 +33,10 @@ def test_matching_recovers_a_permutation_and_respects_candidates() -> None:
     ia, ib = match_descriptors(a, b, ratio=0.8)
     assert len(ia) == 200
     np.testing.assert_array_equal(perm[ib], ia)
-    # restricted to candidate pairs: only pairs offered can match, the rest as before
-    offered = np.arange(0, 200, 2)
-    ca = np.concatenate([perm[offered], perm[offered]])
-    cb = np.concatenate([offered, (offered + 1) % 200])
-    ja, jb = match_candidates(a, b, ca, cb, ratio=0.8)
-    assert set(zip(ja.tolist(), jb.tolist(), strict=True)) == set(
-        zip(perm[offered].tolist(), offered.tolist(), strict=True)
-    )
+    # a descriptor of A with two near-identical twins in B is ambiguous: the ratio test drops it
+    twins = np.vstack([b, b[:1]])
+    ja, _ = match_descriptors(a, twins, ratio=0.8)
+    assert len(ja) == 199 and perm[0] not in ja
 
 
 def _point_sets(rng: np.random.Generator, T_a_b: np.ndarray, n: int, outliers: int = 0):
@@ -69,13 +65,17 @@ def _error(reg: Registration, T_true: np.ndarray) -> np.ndarray:
 
 
 def test_registration_is_robust_and_its_covariance_is_honest() -> None:
-    """Monte Carlo: the normalised errors follow a chi-square with 6 degrees of freedom."""
+    """Monte Carlo: the normalised errors follow a chi-square with 6 degrees of freedom.
+
+    The points' errors here are independent, as the registration's model assumes, so the covariance
+    is tested without the inflation that real stereo pairs need (its docstring)."""
     rng = np.random.default_rng(3)
+    exact = RegistrationSettings(covariance_inflation=1.0)
     T = se3(euler2rot(2.0, 0.03, -0.02), np.array([0.3, -0.2, 0.05]))
     d2 = []
     for _ in range(100):
         a, b = _point_sets(rng, T, 120, outliers=25)
-        reg = register(a, b)
+        reg = register(a, b, exact)
         assert reg.accepted, reg.reason
         assert reg.inliers >= 90
         e = _error(reg, T)

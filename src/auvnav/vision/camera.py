@@ -161,6 +161,24 @@ def triangulate(
     return p_rect @ R1, np.einsum("ji,njk,kl->nil", R1, cov_rect, R1)
 
 
+_MAPS: dict[str, tuple[tuple[NDArray, NDArray], tuple[NDArray, NDArray]]] = {}
+
+
+def rectify_images(
+    left: NDArray[np.uint8], right: NDArray[np.uint8], rig: StereoRig, rect: Rectification
+) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
+    """Both images resampled into the rectified geometry (bilinear); the maps are made once per rig."""
+    key = rig_digest(rig)
+    if key not in _MAPS:
+        size = (rig.left.width, rig.left.height)
+        _MAPS[key] = tuple(  # type: ignore[assignment]
+            cv2.initUndistortRectifyMap(cam.K, np.asarray(cam.D, dtype=float), R, P, size, cv2.CV_16SC2)
+            for cam, R, P in ((rig.left, rect.R1, rect.P1), (rig.right, rect.R2, rect.P2))
+        )
+    (l1, l2), (r1, r2) = _MAPS[key]
+    return cv2.remap(left, l1, l2, cv2.INTER_LINEAR), cv2.remap(right, r1, r2, cv2.INTER_LINEAR)
+
+
 def check_image_size(cam: CameraModel, shape: tuple[int, ...], name: str) -> None:
     """Raise a one-line :class:`ConfigError` when an image does not have the calibrated size."""
     h, w = shape[:2]

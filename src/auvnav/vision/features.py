@@ -44,27 +44,33 @@ class FeatureSettings:
     sigma_px : float
         1-sigma keypoint position noise, pixels of the image SIFT runs on (0.4 px, a usual figure for SIFT).
     stereo_gate_px : float
-        Largest difference of rectified rows between the left and right feature of a stereo match.
-    ratio : float
-        Lowe's ratio test: best descriptor distance below ``ratio`` times the second best.
+        Largest difference of rectified rows between the left and right feature of a stereo match,
+        pixels of the image SIFT runs on.
+    lk_window_px : int
+        Side of the patch tracked from the left image into the right one, pixels of the image SIFT
+        runs on.
+    max_round_trip_px : float
+        Largest distance, pixels of the image SIFT runs on, between a left keypoint and where it lands
+        when tracked to the right image and back.
     min_range_m, max_range_m : float
         Plausible distances of the seafloor from the camera; bound the disparity search.
     """
 
     scale: float | None = None
-    max_features: int = 4000
+    max_features: int = 2500
     contrast_threshold: float = 0.02
     sigma_px: float = 0.4
     stereo_gate_px: float = 2.0
-    ratio: float = 0.8
+    lk_window_px: int = 21
+    max_round_trip_px: float = 0.5
     min_range_m: float = 0.5
     max_range_m: float = 12.0
 
     def __post_init__(self) -> None:
         if self.scale is not None and not 0 < self.scale <= 1:
             raise ValueError(f"scale must be in (0, 1]; found {self.scale}")
-        if self.sigma_px <= 0 or self.stereo_gate_px <= 0 or not 0 < self.ratio <= 1:
-            raise ValueError("sigma_px and stereo_gate_px must be positive, ratio in (0, 1]")
+        if min(self.sigma_px, self.stereo_gate_px, self.lk_window_px, self.max_round_trip_px) <= 0:
+            raise ValueError("sigma_px, stereo_gate_px, lk_window_px and max_round_trip_px must be positive")
         if not 0 < self.min_range_m < self.max_range_m:
             raise ValueError(
                 f"need 0 < min_range_m < max_range_m; found {self.min_range_m}, {self.max_range_m}"
@@ -149,54 +155,19 @@ def detect(image: NDArray[np.uint8], settings: FeatureSettings) -> Keypoints:
     return Keypoints(uv, size, np.asarray(desc, dtype=np.uint8))
 
 
-def _ratio_mutual(
-    ia: NDArray[np.intp], ib: NDArray[np.intp], d2: NDArray[np.float32], na: int, nb: int, ratio: float
-) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """Of candidate pairs (ia, ib) with squared distances d2: the mutual nearest neighbours that pass
-    the ratio test against the second-best candidate on both sides."""
-    empty = np.zeros(0, dtype=np.intp)
-    if len(ia) == 0:
-        return empty, empty
-    r2 = ratio * ratio
-
-    def best(owner: NDArray[np.intp], n: int) -> tuple[NDArray[np.intp], NDArray[np.float32]]:
-        """For each owner index: the pair index of its best candidate and the second-best distance."""
-        order = np.lexsort((d2, owner))
-        first = np.ones(len(order), dtype=bool)
-        first[1:] = owner[order[1:]] != owner[order[:-1]]
-        starts = np.flatnonzero(first)
-        best_pair = np.full(n, -1, dtype=np.intp)
-        second = np.full(n, np.inf, dtype=np.float32)
-        best_pair[owner[order[starts]]] = order[starts]
-        has_second = np.append(starts[1:], len(order)) - starts > 1
-        second[owner[order[starts[has_second]]]] = d2[order[starts[has_second] + 1]]
-        return best_pair, second
-
-    best_a, second_a = best(ia, na)
-    best_b, second_b = best(ib, nb)
-    pair = best_a[best_a >= 0]
-    ok = best_b[ib[pair]] == pair
-    pair = pair[ok]
-    ok = (d2[pair] < r2 * second_a[ia[pair]]) & (d2[pair] < r2 * second_b[ib[pair]])
-    return ia[pair[ok]], ib[pair[ok]]
-
-
-def _sq_distances(desc_a: NDArray[np.uint8], desc_b: NDArray[np.uint8]) -> NDArray[np.float32]:
-    a = desc_a.astype(np.float32)
-    b = desc_b.astype(np.float32)
-    return np.maximum((a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * (a @ b.T), 0.0)
-
-
 def match_descriptors(
     desc_a: NDArray[np.uint8], desc_b: NDArray[np.uint8], *, ratio: float
 ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """Mutual nearest neighbours (all against all) that pass Lowe's ratio test both ways.
+    """Mutual nearest neighbours (all against all) whose best distance passes Lowe's ratio test.
+
+    Squared distances come from one float32 matrix product (``|a|^2 + |b|^2 - 2 a.b``), reduced along
+    rows for each descriptor of A's best and second-best, and along columns for each of B's best.
 
     Parameters
     ----------
     desc_a, desc_b : ndarray, shapes (Na, 128), (Nb, 128)
     ratio : float
-        Best distance must be below ``ratio`` times the second best.
+        A's best distance must be below ``ratio`` times its second best.
 
     Returns
     -------
@@ -206,33 +177,17 @@ def match_descriptors(
     empty = np.zeros(0, dtype=np.intp)
     if len(desc_a) < 2 or len(desc_b) < 2:
         return empty, empty
-    d2 = _sq_distances(desc_a, desc_b)
-    rows = np.arange(len(desc_a))
+    a = desc_a.astype(np.float32)
+    b = desc_b.astype(np.float32)
+    d2 = a @ b.T
+    d2 *= -2.0
+    d2 += (a * a).sum(1)[:, None]
+    d2 += (b * b).sum(1)[None, :]
+    rows = np.arange(len(a))
     ja = np.argmin(d2, axis=1)
-    best_a = d2[rows, ja]
+    best = d2[rows, ja].copy()
     d2[rows, ja] = np.inf
-    second_a = d2.min(axis=1)
-    d2[rows, ja] = best_a
-    cols = np.arange(len(desc_b))
-    ib_best = np.argmin(d2, axis=0)
-    d2[ib_best, cols]
-    d2[ib_best, cols] = np.inf
-    second_b = d2.min(axis=0)
-    r2 = ratio * ratio
-    ok = (ib_best[ja] == rows) & (best_a < r2 * second_a) & (best_a < r2 * second_b[ja])
+    second = d2.min(axis=1)
+    d2[rows, ja] = best
+    ok = (best <= d2.min(axis=0)[ja]) & (best < ratio * ratio * second)
     return rows[ok], ja[ok]
-
-
-def match_candidates(
-    desc_a: NDArray[np.uint8],
-    desc_b: NDArray[np.uint8],
-    ia: NDArray[np.intp],
-    ib: NDArray[np.intp],
-    *,
-    ratio: float,
-) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """Like :func:`match_descriptors` among the candidate pairs ``(ia[k], ib[k])`` only (e.g. the
-    stereo epipolar band): distances are computed for those pairs alone."""
-    diff = desc_a[ia].astype(np.float32) - desc_b[ib].astype(np.float32)
-    d2 = np.einsum("ij,ij->i", diff, diff)
-    return _ratio_mutual(ia, ib, d2, len(desc_a), len(desc_b), ratio)
