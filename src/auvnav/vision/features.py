@@ -191,3 +191,57 @@ def match_descriptors(
     d2[rows, ja] = best
     ok = (best <= d2.min(axis=0)[ja]) & (best < ratio * ratio * second)
     return rows[ok], ja[ok]
+
+
+@dataclass(frozen=True)
+class Vocabulary:
+    """A coarse visual vocabulary: descriptors are matched only against those of the same word.
+
+    Exhaustive matching of two stereo pairs' descriptors is the verification's main cost; splitting
+    both sets by their nearest of ``k`` k-means centres divides it by about ``k``, at the price of the
+    true matches that fall on either side of a boundary (the same device as the direct index of
+    DBoW2: Galvez-Lopez and Tardos 2012, IEEE Trans. Robotics 28(5)).
+
+    Parameters
+    ----------
+    centres : ndarray, shape (k, 128), float32
+    """
+
+    centres: NDArray[np.float32]
+
+    def words(self, descriptors: NDArray[np.uint8]) -> NDArray[np.intp]:
+        """The word (nearest centre) of each descriptor."""
+        c = self.centres
+        d = descriptors.astype(np.float32)
+        return np.argmin((c * c).sum(1)[None, :] - 2.0 * (d @ c.T), axis=1)
+
+
+def build_vocabulary(descriptors: NDArray[np.uint8], k: int, *, seed: int = 0) -> Vocabulary:
+    """k-means (k-means++ seeding, ``cv2.kmeans``) of a sample of a dive's descriptors."""
+    data = np.ascontiguousarray(descriptors, dtype=np.float32)
+    if len(data) < k:
+        raise ValueError(f"need at least {k} descriptors for a vocabulary of {k} words; found {len(data)}")
+    cv2.setRNGSeed(seed)
+    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_MAX_ITER, 20, 1.0)
+    _, _, centres = cv2.kmeans(data, k, None, criteria, 1, cv2.KMEANS_PP_CENTERS)
+    return Vocabulary(centres.astype(np.float32))
+
+
+def match_by_word(
+    desc_a: NDArray[np.uint8],
+    desc_b: NDArray[np.uint8],
+    vocabulary: Vocabulary | None,
+    *,
+    ratio: float,
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """:func:`match_descriptors` within each word of ``vocabulary`` (all against all when None)."""
+    if vocabulary is None:
+        return match_descriptors(desc_a, desc_b, ratio=ratio)
+    wa, wb = vocabulary.words(desc_a), vocabulary.words(desc_b)
+    ia, ib = [], []
+    for w in range(len(vocabulary.centres)):
+        sa, sb = np.flatnonzero(wa == w), np.flatnonzero(wb == w)
+        ja, jb = match_descriptors(desc_a[sa], desc_b[sb], ratio=ratio)
+        ia.append(sa[ja])
+        ib.append(sb[jb])
+    return np.concatenate(ia), np.concatenate(ib)

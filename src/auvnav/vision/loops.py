@@ -31,7 +31,7 @@ import logging
 import time
 from collections.abc import Callable, Iterable
 from concurrent.futures import Executor, ProcessPoolExecutor
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -55,7 +55,7 @@ from auvnav.vision.candidates import (
     candidate_pairs,
     footprints,
 )
-from auvnav.vision.features import FeatureSettings
+from auvnav.vision.features import FeatureSettings, Vocabulary, build_vocabulary
 from auvnav.vision.loopfile import LoopClosures, loops_from_transforms, write_loops
 from auvnav.vision.registration import RegistrationSettings, _expm_so3, register
 from auvnav.vision.stereo import StereoFeatures, cache_path, pair_features
@@ -84,6 +84,10 @@ class LoopSettings:
     per_image_per_round : int
         Most candidates an image takes part in per round, most probable first: the loops found
         refine the prior before less probable candidates are tried.
+    vocabulary_words : int
+        Words of the coarse vocabulary that splits descriptor matching
+        (:class:`~auvnav.vision.features.Vocabulary`), learnt from the dive's own descriptors;
+        1: every descriptor against every other.
     """
 
     features: FeatureSettings = field(default_factory=FeatureSettings)
@@ -93,6 +97,7 @@ class LoopSettings:
     max_heading_disagreement_rad: float = float(np.radians(20.0))
     max_rounds: int = 50
     per_image_per_round: int = 2
+    vocabulary_words: int = 8
 
 
 @dataclass(frozen=True)
@@ -176,6 +181,7 @@ class _Context:
     rect: Rectification
     settings: LoopSettings
     cache_dir: Path
+    vocabulary: Vocabulary | None = None
 
 
 def _features_task(ctx: _Context, items: list[tuple[int, str, str]]) -> list[tuple[int, str | None, int]]:
@@ -210,7 +216,9 @@ def _verify_task(
     T_bc = T_body_cam(ctx.rig)
     out = []
     for i, j, pi, pj, T_prior, sigma in items:
-        reg = register(_load(pi), _load(pj), ctx.settings.registration, prior=(T_prior, sigma))
+        reg = register(
+            _load(pi), _load(pj), ctx.settings.registration, prior=(T_prior, sigma), vocabulary=ctx.vocabulary
+        )
         if reg.accepted:
             p6, c6 = body_pose_and_covariance(reg.T_a_b, reg.cov_xi, T_bc)
         else:
@@ -221,6 +229,20 @@ def _verify_task(
             )
         )
     return out
+
+
+def _vocabulary(files: list[str], words: int, sample: int = 20_000) -> Vocabulary | None:
+    """A vocabulary learnt from about ``sample`` descriptors drawn evenly from the dive's pairs (None
+    when the dive has too few descriptors to split)."""
+    rng = np.random.default_rng(0)
+    picked = files[:: max(1, len(files) // 50)]
+    per_file = max(1, sample // len(picked))
+    desc = []
+    for path in picked:
+        d = _load(path).descriptors
+        desc.append(d[rng.choice(len(d), min(per_file, len(d)), replace=False)])
+    data = np.concatenate(desc)
+    return build_vocabulary(data, words) if len(data) >= 20 * words else None
 
 
 def _chunks(items: list, size: int) -> Iterable[list]:
@@ -361,6 +383,8 @@ def find_loops(
         usable = np.array(sorted(files), dtype=np.intp)
         if len(usable) < 2:
             raise InsufficientDataError("images: fewer than two readable stereo pairs")
+        if settings.vocabulary_words > 1:
+            ctx = replace(ctx, vocabulary=_vocabulary([files[k] for k in usable], settings.vocabulary_words))
         pri = prior.interpolate(t[usable])
         fp_u = footprints(pri, image_altitude(dive, t[usable]), rig)
         speed = float(

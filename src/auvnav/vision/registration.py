@@ -10,7 +10,8 @@ covariances ``S_a,k`` and ``S_b,k``, the pose ``T_a_b = (R, t)`` minimises
 
 Steps (:func:`register`):
 
-1. descriptor matches: mutual nearest neighbours passing Lowe's ratio test;
+1. descriptor matches: mutual nearest neighbours passing Lowe's ratio test (within the words of a
+   coarse vocabulary when one is given);
 2. RANSAC on minimal sets of three matches (Kabsch/Horn closed form; Horn 1987, JOSA A 4(4)), inliers by
    the Mahalanobis distance above (chi-square, 3 degrees of freedom);
 3. weighted least squares (Gauss-Newton on the pose, weights re-evaluated with the current rotation);
@@ -31,7 +32,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from auvnav.frames import se3
-from auvnav.vision.features import match_descriptors
+from auvnav.vision.features import Vocabulary, match_by_word
 from auvnav.vision.stereo import StereoFeatures
 
 FloatArray = NDArray[np.float64]
@@ -207,7 +208,11 @@ def _ransac(
         score = np.sort(rng.choice(n, RANSAC_SCORING_POINTS, replace=False))
     else:
         score = np.arange(n)
-    sa, sb, sSa, sSb = a[score], b[score], Sa[score], Sb[score]
+    # Hypotheses are scored with the rotation of B's covariances ignored (``Sa + Sb``): the points'
+    # uncertainty lies mostly along the camera axis, which the small tilts between pairs hardly move,
+    # and it saves a 3x3 inverse per point per hypothesis.
+    sa, sb = a[score], b[score]
+    W = _inverse_sym3(Sa[score] + Sb[score])
     best_count = 0
     best_model: tuple[FloatArray, FloatArray] | None = None
     needed, done, batch = s.ransac_max_iterations, 0, 64
@@ -219,7 +224,8 @@ def _ransac(
         ok = area > 1e-3  # m^2: sides of a few centimetres at least
         if ok.any():
             R, t = kabsch(pa[ok], pb[ok])
-            _, _, d2 = _mahalanobis2(sa, sb, sSa, sSb, R, t)
+            r = sa - sb @ np.swapaxes(R, -1, -2) - t[:, None, :]
+            d2 = np.einsum("hni,nij,hnj->hn", r, W, r)
             counts = (d2 < gate).sum(axis=1)
             k = int(np.argmax(counts))
             if counts[k] > best_count:
@@ -261,7 +267,7 @@ def _refine(
             break
         R = _expm_so3(step[3:]) @ R
         t = t + step[:3]
-        if np.abs(step).max() < 1e-9:
+        if np.abs(step).max() < 1e-8:  # metres and radians: far below any sigma
             break
     r, W, d2 = _mahalanobis2(a, b, Sa, Sb, R, t)
     inl, w = _weights(d2, gate, huber_k)
@@ -294,18 +300,20 @@ def register(
     settings: RegistrationSettings | None = None,
     *,
     prior: tuple[FloatArray, float] | None = None,
+    vocabulary: Vocabulary | None = None,
 ) -> Registration:
     """Estimate ``T_a_b`` (the pose of pair B's left camera in pair A's) from two stereo feature sets.
 
     ``prior``: an approximate ``T_a_b`` and the 1-sigma of its lateral position, metres; when given,
-    only points that may lie in both views are matched (:func:`overlap_subsets`).
+    only points that may lie in both views are matched (:func:`overlap_subsets`). ``vocabulary``:
+    descriptors are matched within its words only (:func:`~auvnav.vision.features.match_by_word`).
     """
     s = settings or RegistrationSettings()
     if prior is not None and len(a) and len(b):
         sub_a, sub_b = overlap_subsets(a, b, *prior)
     else:
         sub_a, sub_b = np.arange(len(a)), np.arange(len(b))
-    ia, ib = match_descriptors(a.descriptors[sub_a], b.descriptors[sub_b], ratio=s.ratio)
+    ia, ib = match_by_word(a.descriptors[sub_a], b.descriptors[sub_b], vocabulary, ratio=s.ratio)
     ia, ib = sub_a[ia], sub_b[ib]
 
     def reject(
