@@ -217,9 +217,9 @@ def _ransac(
     best_model: tuple[FloatArray, FloatArray] | None = None
     needed, done, batch = s.ransac_max_iterations, 0, 64
     while done < needed:
-        idx = np.stack([rng.choice(n, 3, replace=False) for _ in range(batch)])
+        idx = rng.integers(0, n, (batch, 3))
         pa, pb = a[idx], b[idx]
-        # Skip degenerate triples: nearly collinear (small triangle).
+        # Skip degenerate triples: repeated or nearly collinear matches (small triangle).
         area = np.linalg.norm(np.cross(pa[:, 1] - pa[:, 0], pa[:, 2] - pa[:, 0]), axis=1)
         ok = area > 1e-3  # m^2: sides of a few centimetres at least
         if ok.any():
