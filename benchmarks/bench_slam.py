@@ -8,18 +8,26 @@ Run::
 
     AUVNAV_REFERENCE_DATA=../shared/reference .venv/bin/python benchmarks/bench_slam.py
     .venv/bin/python benchmarks/bench_slam.py --isam-poses 2000      # a shorter iSAM2 run
+    .venv/bin/python benchmarks/bench_slam.py --poses-per-update 1,10,20
 
 The synthetic graph is a lawnmower survey (auvnav.slam.synthetic.survey_pose_graph): 100 poses per
 track line, 1 m apart, lines 1 m apart, loop closures between poses on adjacent lines within 2.3 m.
+
+iSAM2 adds the poses in order, K per update (``--poses-per-update``, a list: one run each), each
+with every edge to the poses before it: a vehicle that triggers its camera at 1 Hz and updates its
+solution every K seconds. Time per added pose = an update's wall time (building its factors, the
+iSAM2 update, reading the newest pose's estimate) / K, each pose of the update counted; the
+median, 95th percentile and maximum are over the poses, and the update times (the latency of a
+new solution) are reported too. Each iSAM2 run is a fresh process, so its peak memory is its own.
 Peak memory is the process's peak resident set (``resource.getrusage``, which sees GTSAM's C++
-allocations), read after each stage, so each row's peak includes the stages above it (run without
-the reference data for the synthetic graph alone); tracemalloc shows the Python-side peak of a stage.
-The full iSAM2 run on the 10,000-pose survey takes about half an hour on a shared 2-core machine.
+allocations); tracemalloc shows the Python-side peak of the batch solve. Pose by pose (K = 1) the
+full 10,000-pose run takes about half an hour on a shared 2-core machine.
 """
 
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import os
 import resource
 import sys
@@ -94,60 +102,67 @@ def bench_references_incremental(folder: Path) -> None:
         )
 
 
-def bench_synthetic(n_poses: int, n_loops: int, isam_poses: int, seed: int) -> None:
+def _isam2_task(n_poses: int, n_loops: int, seed: int, poses_per_update: int) -> dict[str, object]:
+    """iSAM2 on a synthetic survey, in a child process: timings, cost, poses and peak memory."""
+    graph = survey_pose_graph(n_poses, n_loops, seed=seed).graph
+    result = optimize_incremental(graph, poses_per_update=poses_per_update)
+    return {
+        "step_ms": result.step_seconds * 1e3,
+        "update_ms": result.update_seconds * 1e3,
+        "seconds": result.seconds,
+        "cost_after": result.cost_after,
+        "p_m": result.graph.T_world_pose[:, :3, 3],
+        "peak_rss_mb": peak_rss_mb(),
+    }
+
+
+def bench_synthetic(n_poses: int, n_loops: int, isam_poses: int, ks: list[int], seed: int) -> None:
     print(f"\n## Synthetic survey: {n_poses} poses, {n_loops} loop closures (seed {seed})\n")
     t0 = time.perf_counter()
     survey = survey_pose_graph(n_poses, n_loops, seed=seed)
     graph = survey.graph
     print(f"generated in {time.perf_counter() - t0:.1f} s; peak RSS {peak_rss_mb():.0f} MB\n")
-    print(
-        "| stage | poses | seconds | iterations | chi2 before | chi2 after | edge dof | peak RSS MB | py peak MB |"
-    )
-    print("|---|---|---|---|---|---|---|---|---|")
-    dof = 6 * graph.n_edges - 6 * (graph.n_poses - 1)
-
     tracemalloc.start()
     batch = optimize_batch(graph)
     py_peak = tracemalloc.get_traced_memory()[1] / 2**20
     tracemalloc.stop()
+    print("| solver | poses | seconds | iterations | chi2 before | chi2 after | peak RSS MB | py peak MB |")
+    print("|---|---|---|---|---|---|---|---|")
     print(
         f"| batch LM | {graph.n_poses} | {batch.seconds:.2f} | {batch.iterations} | {batch.cost_before:.6g} "
-        f"| {batch.cost_after:.6g} | {dof} | {peak_rss_mb():.0f} | {py_peak:.0f} |",
+        f"| {batch.cost_after:.6g} | {peak_rss_mb():.0f} | {py_peak:.0f} |",
         flush=True,
     )
     if isam_poses <= 0:
         return
     # A shorter run solves a smaller survey of the same kind (same loop closures per pose).
-    part = (
-        graph
-        if isam_poses >= n_poses
-        else survey_pose_graph(isam_poses, isam_poses * n_loops // n_poses, seed=seed).graph
-    )
-    tracemalloc.start()
-    incremental = optimize_incremental(part)
-    py_peak = tracemalloc.get_traced_memory()[1] / 2**20
-    tracemalloc.stop()
+    size = (n_poses, n_loops) if isam_poses >= n_poses else (isam_poses, isam_poses * n_loops // n_poses)
+    reference = batch if isam_poses >= n_poses else optimize_batch(survey_pose_graph(*size, seed=seed).graph)
     print(
-        f"| iSAM2 | {part.n_poses} | {incremental.seconds:.2f} | {incremental.iterations} "
-        f"| {incremental.cost_before:.6g} | {incremental.cost_after:.6g} "
-        f"| {6 * part.n_edges - 6 * (part.n_poses - 1)} | {peak_rss_mb():.0f} | {py_peak:.0f} |"
+        f"\niSAM2 on {size[0]} poses, K poses per update; ms per added pose (update time / K) "
+        "and per update:\n"
     )
-    step_ms = incremental.step_seconds * 1e3
-    print("\niSAM2 time per added pose, ms (building its factors, update, reading its estimate):\n")
-    print("| poses | median | 95th pct | max |")
-    print("|---|---|---|---|")
-    blocks = np.array_split(np.arange(part.n_poses), min(10, part.n_poses))
-    for rows in blocks:
-        s = step_ms[rows]
-        print(f"| {rows[0]}-{rows[-1]} | {np.median(s):.1f} | {np.percentile(s, 95):.1f} | {s.max():.1f} |")
-    print(f"| all | **{np.median(step_ms):.1f}** | {np.percentile(step_ms, 95):.1f} | {step_ms.max():.1f} |")
-    if part is graph:
-        gap = np.linalg.norm(
-            incremental.graph.T_world_pose[:, :3, 3] - batch.graph.T_world_pose[:, :3, 3], axis=1
-        )
+    print(
+        "| K | per pose: median | 95th | max | per update: median | 95th | max | total s "
+        "| chi2 after (batch) | vs batch: max mm | peak RSS MB |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    ctx = multiprocessing.get_context("spawn")
+    for k in ks:
+        with ctx.Pool(1) as pool:
+            run = pool.apply(_isam2_task, (*size, seed, k))
+        step, update = run["step_ms"], run["update_ms"]
+        gap = np.linalg.norm(run["p_m"] - reference.graph.T_world_pose[:, :3, 3], axis=1)
         print(
-            f"\niSAM2 vs batch positions: max {gap.max() * 1e3:.1f} mm, median {np.median(gap) * 1e3:.2f} mm"
+            f"| {k} | **{np.median(step):.1f}** | {np.percentile(step, 95):.1f} | {step.max():.1f} "
+            f"| {np.median(update):.0f} | {np.percentile(update, 95):.0f} | {update.max():.0f} "
+            f"| {run['seconds']:.0f} | {run['cost_after']:.6g} ({reference.cost_after:.6g}) "
+            f"| {gap.max() * 1e3:.1f} | {run['peak_rss_mb']:.0f} |",
+            flush=True,
         )
+        blocks = np.array_split(np.arange(len(step)), min(10, len(step)))
+        growth = ", ".join(f"{np.median(step[rows]):.1f}" for rows in blocks)
+        print(f"|  | median per pose by tenth of the survey: {growth} | | | | | | | | | |", flush=True)
 
 
 def main() -> int:
@@ -157,6 +172,9 @@ def main() -> int:
     parser.add_argument("--loops", type=int, default=30_000)
     parser.add_argument(
         "--isam-poses", type=int, default=10_000, help="iSAM2 on a survey of N poses (0: skip)"
+    )
+    parser.add_argument(
+        "--poses-per-update", default="10,20", help="iSAM2 runs, K poses per update (comma-separated)"
     )
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
@@ -169,7 +187,8 @@ def main() -> int:
         bench_references_incremental(reference / "pose_graph_g2o")
     else:
         print("\n(reference graphs skipped: set AUVNAV_REFERENCE_DATA or --reference)")
-    bench_synthetic(args.poses, args.loops, args.isam_poses, args.seed)
+    ks = [int(k) for k in args.poses_per_update.split(",")]
+    bench_synthetic(args.poses, args.loops, args.isam_poses, ks, args.seed)
     return 0
 
 

@@ -778,8 +778,11 @@ def slam(
         ),
     ] = False,
     incremental: Annotated[
-        bool, typer.Option("--incremental", help="iSAM2 pose by pose instead of batch Levenberg-Marquardt.")
+        bool, typer.Option("--incremental", help="iSAM2 (a vehicle's solver), not batch Levenberg-Marquardt.")
     ] = False,
+    poses_per_update: Annotated[
+        int, typer.Option("--poses-per-update", min=1, help="With --incremental: poses per iSAM2 update.")
+    ] = 10,
     tide: Annotated[
         Path | None,
         typer.Option("--tide", help="Tide constituent file: the depth becomes depth below the datum."),
@@ -815,6 +818,7 @@ def slam(
         compass_correction=compass_correction,
         estimate_compass=estimate_compass,
         incremental=incremental,
+        poses_per_update=poses_per_update,
         tide=tide,
         compass_sigma_deg=compass_sigma_deg,
         harmonics=harmonics,

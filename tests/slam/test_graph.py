@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from auvnav.frames import euler2rot, rot2euler, se3, se3_inverse, wrap_angle
 from auvnav.nav import FilterConfig, nav_inputs
 from auvnav.nav.synthetic import Noise, legs_motion, synthetic_dive
-from auvnav.slam.compass import COEFFICIENTS_KEY, TILT_SIGMA_RAD, CompassModel, heading_factor, yaw_jacobian
+from auvnav.slam.compass import COEFFICIENTS_KEY, CompassModel, heading_factor, yaw_jacobian
 from auvnav.slam.graph import (
     MERGE_S,
     UNMEASURED_SIGMA_M,
@@ -76,14 +76,15 @@ def test_yaw_jacobian_matches_finite_differences(yaw: float, pitch: float, roll:
 def test_heading_factor_measures_the_heading_only(
     yaw: float, pitch: float, roll: float, error: float
 ) -> None:
-    """A heading error e costs (e / sigma)^2; a pitch error is left to the inclinometer's factor."""
+    """A heading error e costs (e / sigma)^2; pitch and roll errors are left to the inclinometer's factor."""
     sigma = math.radians(2.0)
-    factor = heading_factor(pose_key(0), yaw, euler2rot(yaw, pitch, roll), np.eye(3), sigma, np.zeros(3))
+    factor = heading_factor(pose_key(0), yaw, euler2rot(yaw, pitch, roll), np.eye(3), sigma)
     T = se3(euler2rot(yaw + error, pitch, roll), np.zeros(3))
     chi2 = 2.0 * factor.error(_values(T))
     assert chi2 == pytest.approx((error / sigma) ** 2, rel=1e-6, abs=1e-12)
-    tilted = se3(euler2rot(yaw, pitch + 0.02, roll), np.zeros(3))
-    assert 2.0 * factor.error(_values(tilted)) == pytest.approx((0.02 / TILT_SIGMA_RAD) ** 2, rel=0.02)
+    for tilted in (euler2rot(yaw, pitch + 0.02, roll), euler2rot(yaw, pitch, roll + 0.02)):
+        # Euler ZYX: the yaw is unchanged; second order in the tilt at most (0.02^2 / 2 radians).
+        assert 2.0 * factor.error(_values(se3(tilted, np.zeros(3)))) < (2e-4 / sigma) ** 2
 
 
 @pytest.mark.parametrize("turn_deg", [90.0, 170.0, 179.0])
@@ -91,7 +92,7 @@ def test_heading_factor_grows_up_to_a_half_turn(turn_deg: float) -> None:
     """A pose turned by d about the vertical costs (d / sigma)^2 however large d: a flip is not free."""
     sigma = math.radians(10.0)
     R = euler2rot(0.4, 0.1, -0.2)
-    factor = heading_factor(pose_key(0), 0.4, R, np.eye(3), sigma, np.zeros(3))
+    factor = heading_factor(pose_key(0), 0.4, R, np.eye(3), sigma)
     turned = se3(euler2rot(0.4 + math.radians(turn_deg), 0.1, -0.2), np.zeros(3))
     assert 2.0 * factor.error(_values(turned)) == pytest.approx(
         (math.radians(turn_deg) / sigma) ** 2, rel=1e-6
@@ -103,13 +104,15 @@ def test_heading_factor_of_a_rotated_compass() -> None:
     mount = euler2rot(math.pi / 2, 0.0, 0.0)
     R_body = euler2rot(0.3, 0.05, -0.02)
     measured = float(rot2euler(R_body @ mount)[0])
-    factor = heading_factor(pose_key(0), measured, R_body @ mount, mount, math.radians(1.0), np.zeros(3))
+    factor = heading_factor(pose_key(0), measured, R_body @ mount, mount, math.radians(1.0))
     assert factor.error(_values(se3(R_body, np.zeros(3)))) == pytest.approx(0.0, abs=1e-16)
     assert measured == pytest.approx(0.3 + math.pi / 2, abs=0.01)
 
 
 def test_estimated_compass_factor_error_and_jacobians() -> None:
-    """yaw - declination - h - phi(h) x, with analytic Jacobians equal to finite differences."""
+    """yaw - declination - h - phi(h) x for a heading far from the compass's, with the yaw's own
+    Jacobian (finite differences of the compass frame's Euler yaw) and -phi(h)."""
+    sigma = math.radians(1.0)
     model = CompassModel(
         R_body_compass=euler2rot(0.1, 0.0, 0.0), declination_rad=0.04, estimate=True, harmonics=2
     )
@@ -117,13 +120,26 @@ def test_estimated_compass_factor_error_and_jacobians() -> None:
     x = np.array([0.01, 0.02, -0.03, 0.005, 0.004])
     phi = np.array([1.0, math.cos(h), math.sin(h), math.cos(2 * h), math.sin(2 * h)])
     T = se3(euler2rot(0.9, 0.1, -0.05), np.array([1.0, 2.0, 3.0]))
-    factor = model.factor(pose_key(0), h, T[:3, :3], math.radians(1.0), T[:3, 3])
-    yaw_compass = rot2euler(T[:3, :3] @ model.R_body_compass)[0]
-    expected = wrap_angle(yaw_compass - 0.04 - h - phi @ x)
-    np.testing.assert_allclose(factor.unwhitenedError(_values(T, x)), [expected], atol=1e-12)
-    A = factor.linearize(_values(T, x)).jacobian()[0] * math.radians(1.0)  # whitened by sigma
-    np.testing.assert_allclose(A[:, :6], _numeric_pose_jacobian(factor, T, x), atol=1e-6)
-    np.testing.assert_allclose(A[:, 6:], -phi[None, :], atol=1e-12)
+    factor = model.factor(pose_key(0), h, T[:3, :3], sigma)
+
+    def heading_error(R: np.ndarray) -> float:
+        return wrap_angle(rot2euler(R @ model.R_body_compass)[0] - 0.04 - h - phi @ x)
+
+    A, b = factor.linearize(_values(T, x)).jacobian()  # whitened: A x - b, at the values
+    assert heading_error(T[:3, :3]) == pytest.approx(0.25, abs=0.01)  # 14 degrees off the compass
+    assert -b[0] * sigma == pytest.approx(heading_error(T[:3, :3]), abs=1e-12)
+    step = 1e-7
+    numeric = [
+        wrap_angle(
+            heading_error(T[:3, :3] @ gtsam.Rot3.Expmap(step * e).matrix())
+            - heading_error(T[:3, :3] @ gtsam.Rot3.Expmap(-step * e).matrix())
+        )
+        / (2 * step)
+        for e in np.eye(3)
+    ]
+    np.testing.assert_allclose(A[0, :3] * sigma, numeric, atol=1e-6)
+    np.testing.assert_allclose(A[0, 3:6], 0.0)
+    np.testing.assert_allclose(A[0, 6:] * sigma, -phi, atol=1e-12)
 
 
 def test_position_factor_with_a_lever_arm_measures_only_what_is_given() -> None:
@@ -132,11 +148,12 @@ def test_position_factor_with_a_lever_arm_measures_only_what_is_given() -> None:
     antenna = T[:3, 3] + T[:3, :3] @ lever
     sigma = np.array([3.0, 3.0, UNMEASURED_SIGMA_M])
     factor = position_factor(pose_key(0), antenna + np.array([0.0, 0.0, 7.0]), sigma, lever)
-    assert 2.0 * factor.error(_values(T)) < 1e-6  # 7 m off in the unmeasured coordinate costs nothing
+    assert 2.0 * factor.error(_values(T)) == 0.0  # 7 m off in the unmeasured coordinate costs nothing
     moved = se3(T[:3, :3], T[:3, 3] + np.array([3.0, 0.0, 0.0]))
     assert 2.0 * factor.error(_values(moved)) == pytest.approx(1.0, rel=1e-6)
-    A = factor.linearize(_values(T)).jacobian()[0] * sigma[:, None]  # whitened by sigma
-    np.testing.assert_allclose(A, _numeric_pose_jacobian(factor, T), atol=1e-6)
+    A = factor.linearize(_values(T)).jacobian()[0]  # whitened by sigma: no row for the depth
+    np.testing.assert_allclose(A[:2] * sigma[:2, None], _numeric_pose_jacobian(factor, T)[:2], atol=1e-6)
+    np.testing.assert_array_equal(A[2], 0.0)
 
 
 def test_loop_covariance_in_gtsam_tangent_matches_sampling() -> None:

@@ -130,6 +130,8 @@ def _bad(dive: Path, tmp_path: Path, edit: str) -> tuple[Path, int]:
     row = 7
     if edit == "pose":
         frame.loc[row - 1, "j"] = 100000
+    elif edit == "self":
+        frame.loc[row - 1, "j"] = frame.loc[row - 1, "i"]
     elif edit == "covariance":
         frame.loc[row - 1, "cov00"] = -1e-4
     else:
@@ -143,6 +145,7 @@ def _bad(dive: Path, tmp_path: Path, edit: str) -> tuple[Path, int]:
     ("edit", "message"),
     [
         ("pose", "names pose"),
+        ("self", "to itself"),
         ("covariance", "covariance is not positive definite"),
         ("times", "differ from the image times"),
     ],

@@ -96,13 +96,18 @@ def test_robust_kernel_rejects_false_loop_closures(small_survey: SyntheticPoseGr
     assert not small_survey.graph.is_odometry[robust_result.rejected].any()
 
 
-def test_isam2_matches_batch(small_survey: SyntheticPoseGraph) -> None:
+@pytest.mark.parametrize("poses_per_update", [1, 7])
+def test_isam2_matches_batch(small_survey: SyntheticPoseGraph, poses_per_update: int) -> None:
     graph = small_survey.graph.subgraph(~small_survey.is_outlier)
     batch = optimize_batch(graph)
-    incremental = optimize_incremental(graph, relinearize_skip=1)
+    incremental = optimize_incremental(graph, relinearize_skip=1, poses_per_update=poses_per_update)
     assert incremental.method == "isam2"
+    updates = -(-graph.n_poses // poses_per_update)  # ceil: the last update takes the rest
+    assert incremental.iterations == updates and incremental.update_seconds.shape == (updates,)
     assert incremental.step_seconds.shape == (graph.n_poses,)
     assert np.all(incremental.step_seconds > 0)
+    # Each pose carries its update's time shared among the poses the update added.
+    assert incremental.step_seconds.sum() == pytest.approx(incremental.update_seconds.sum())
     assert incremental.cost_after == pytest.approx(batch.cost_after, rel=1e-2)
     assert _position_error_m(incremental.graph, batch.graph) < 0.01  # 1 cm over a 100 m survey
 

@@ -4,6 +4,9 @@
 - :mod:`auvnav.slam.solve`: chi-square cost, batch Levenberg-Marquardt, incremental iSAM2, robust
   loop closures, marginal covariances.
 - :mod:`auvnav.slam.synthetic`: survey pose graphs with a known truth, for tests and benchmarks.
+- :mod:`auvnav.slam.graph`: a dive's sensor graph (DVL, attitude, depth, compass, fixes, loop
+  closures), solved in batch or with iSAM2; :mod:`auvnav.slam.compass`: its heading factor and the
+  deviation estimated inside it; :mod:`auvnav.slam.products`: the ``auvnav slam`` stage.
 """
 
 from auvnav.slam.g2o import PoseGraph, PoseGraphFormatError, read_g2o, write_g2o

@@ -25,12 +25,26 @@ correction file then records ``constant.source: graph``. When the posterior of `
 least :data:`OBSERVABLE_RATIO` tighter than its prior, the constant is reported as ``arbitrary`` (it
 is the prior's, pulled by whatever weak information the dive holds), as a fit to SLAM headings is.
 
-With a raw or fixed correction the factor is GTSAM's ``PriorFactorPose3`` with a heading-only
-information (:func:`heading_factor`); the estimated one is a Python ``CustomFactor`` (it joins the
-coefficients). Its Jacobians are analytic, for GTSAM's right perturbation ``R Exp(w)`` of a pose
-(tangent ordering ``(w, v)``): the yaw ``psi = atan2(R10, R00)`` of ``R' = R M`` moves by
-``d psi = j(R') . M^T w``, ``j(R) = [0, R10 R02 - R00 R12, R00 R11 - R10 R01] / (R00^2 + R10^2)``,
-and by ``-phi(h)`` with the coefficients.
+One heading factor serves the three modes (:func:`heading_factor`). It is linear in GTSAM's
+tangent of the pose at ``R0``, the body attitude whose compass frame has the target heading
+(``h + declination``, plus the fixed correction when there is one) and the measured pitch and roll,
+``R0 = Rz(target) Ry(pitch) Rx(roll) R_body_compass^T``:
+
+    e = j . w - phi(h) . x,    w = Log(R0^T R)  (the rotation part of GTSAM's right perturbation)
+
+with ``j = j(R0 M) M^T``, ``j(R) = [0, R10 R02 - R00 R12, R00 R11 - R10 R01] / (R00^2 + R10^2)`` the
+derivative of the yaw ``atan2(R10, R00)`` of the compass frame ``R M`` under ``R Exp(w)``
+(:func:`yaw_jacobian`), and the ``phi . x`` term only when estimating. A turn of the pose about the
+vertical by ``d`` is ``w = d u`` exactly (``u = R0^T e_z``) and ``j . u = 1``, so the error is the
+heading error for any ``|d| < pi`` (the yaw-only prior is exact for any heading error; a flipped pose
+costs the most); roll and pitch errors, which leave the heading unchanged to first order, do not
+enter it (``j . w = 0`` for them; the inclinometer's factor holds them), and a tilt ``t`` on top of a
+heading error ``d`` adds about ``d |t| / 2``. Its Jacobian, held at ``R0``, is the yaw's own at
+every pose turned from ``R0`` about the vertical (the yaw's derivative does not depend on the yaw),
+and ``-phi(h)`` with the coefficients. The factor is GTSAM's ``LinearContainerFactor`` around a
+``JacobianFactor`` (keys: the pose, and the coefficients when estimating), so it is built and
+evaluated in C++: fast in GTSAM's optimisers and in iSAM2, unlike a Python ``CustomFactor`` (which
+GTSAM hands a copy of every value at every call).
 """
 
 from __future__ import annotations
@@ -51,15 +65,6 @@ HARMONIC_PRIOR_SIGMA_RAD = math.radians(10.0)
 #: its prior sigma.
 OBSERVABLE_RATIO = 0.5
 
-#: A heading factor's sigma across the vertical (roll and pitch), radians: loose, the inclinometer's
-#: factor holds them.
-TILT_SIGMA_RAD = 1.0
-#: Sigma of a coordinate a factor does not measure (a heading factor's translation, a fix's depth, the
-#: pressure depth's north and east), metres: its information is 1e-10 of a centimetre-level
-#: measurement's, so it neither constrains nor, at tens of metres from its nominal value, adds more
-#: than 1e-5 to the chi-square.
-UNMEASURED_SIGMA_M = 1e4
-
 #: The key of the compass coefficients in the graph (poses are ``gtsam.symbol("x", k)``).
 COEFFICIENTS_KEY = gtsam.symbol("c", 0)
 
@@ -76,43 +81,46 @@ def heading_factor(
     R_ned_sensor: FloatArray,
     R_body_sensor: FloatArray,
     sigma_rad: float,
-    p_ned_m: FloatArray,
-) -> gtsam.PriorFactorPose3:
-    """A unary factor on the heading of a sensor frame of a pose: a ``PriorFactorPose3`` on its heading.
+    phi: FloatArray | None = None,
+) -> gtsam.LinearContainerFactor:
+    """The unary heading factor of a sensor frame of a pose, with the deviation's coefficients when given.
 
-    The prior is the body attitude whose sensor frame has the measured heading (and the measured
-    pitch and roll), ``R0 = Rz(heading) Ry(pitch) Rx(roll) R_body_sensor^T``. A turn of the pose
-    about the vertical by ``d`` is the rotation vector ``d u`` in GTSAM's tangent at ``R0``,
-    ``u = R0^T e_z`` (the vertical in the body frame), exactly, for any ``|d| < pi``; the information
-    ``u u^T / sigma^2`` on the rotation (plus :data:`TILT_SIGMA_RAD` across it and
-    :data:`UNMEASURED_SIGMA_M` on the translation, at ``p_ned_m``, so that the matrix is positive
-    definite) makes it a heading factor that leaves roll and pitch to the inclinometer's own factor.
-    Its error grows all the way to a half turn (a flipped pose costs the most), and it is built in
-    C++: fast in GTSAM's optimisers, unlike a Python ``CustomFactor``.
+    ``e = j . Log(R0^T R) - phi . x`` (module docstring): linear in the pose's tangent at ``R0``
+    (the attitude whose sensor frame has ``heading_rad`` and the measured pitch and roll) and in
+    the coefficients ``x`` (key :data:`COEFFICIENTS_KEY`, linearised at zero).
 
     Parameters
     ----------
     key : int
         The pose's key.
     heading_rad : float
-        The measured heading of the sensor frame (true north), radians.
+        The target heading of the sensor frame (true north), radians: the compass heading plus the
+        declination, plus a fixed correction.
     R_ned_sensor : ndarray, shape (3, 3)
         The measured attitude of the sensor frame (its pitch and roll are used).
     R_body_sensor : ndarray, shape (3, 3)
         The sensor's mount.
     sigma_rad : float
         Heading sigma, radians.
-    p_ned_m : ndarray, shape (3,)
-        Where to put the prior's (unmeasured) translation: the pose's initial guess, metres.
+    phi : ndarray, shape (2N+1,), optional
+        The Fourier design row of the compass heading (eq. 5-6): the factor then joins the
+        coefficients, ``target + phi . x``.
     """
     _, pitch, roll = rot2euler(R_ned_sensor)
-    R0 = euler2rot(heading_rad, pitch, roll) @ np.asarray(R_body_sensor, dtype=float).T
-    u = R0[2]  # R0^T e_z
-    info = np.zeros((6, 6))
-    info[:3, :3] = np.outer(u, u) / sigma_rad**2 + (np.eye(3) - np.outer(u, u)) / TILT_SIGMA_RAD**2
-    info[3:, 3:] = np.eye(3) / UNMEASURED_SIGMA_M**2
-    prior = gtsam.Pose3(gtsam.Rot3(R0), np.asarray(p_ned_m, dtype=float))
-    return gtsam.PriorFactorPose3(key, prior, gtsam.noiseModel.Gaussian.Information(info))
+    M = np.asarray(R_body_sensor, dtype=float)
+    R0_sensor = euler2rot(heading_rad, pitch, roll)
+    R0 = R0_sensor @ M.T
+    A_pose = np.concatenate([yaw_jacobian(R0_sensor) @ M.T, np.zeros(3)])[None, :]
+    noise = gtsam.noiseModel.Isotropic.Sigma(1, sigma_rad)
+    point = gtsam.Values()
+    point.insert(key, gtsam.Pose3(gtsam.Rot3(R0), np.zeros(3)))
+    if phi is None:
+        linear = gtsam.JacobianFactor(key, A_pose, np.zeros(1), noise)
+    else:
+        phi = np.asarray(phi, dtype=float)
+        point.insert(COEFFICIENTS_KEY, np.zeros(len(phi)))
+        linear = gtsam.JacobianFactor(key, A_pose, COEFFICIENTS_KEY, -phi[None, :], np.zeros(1), noise)
+    return gtsam.LinearContainerFactor(linear, point)
 
 
 @dataclass(frozen=True)
@@ -165,8 +173,8 @@ class CompassModel:
         return wrap_angle(h + delta + self.declination_rad)
 
     def factor(
-        self, key: int, h_rad: float, R_ned_body_measured: FloatArray, sigma_rad: float, p_ned_m: FloatArray
-    ) -> gtsam.NonlinearFactor:
+        self, key: int, h_rad: float, R_ned_body_measured: FloatArray, sigma_rad: float
+    ) -> gtsam.LinearContainerFactor:
         """The heading factor of the pose ``key`` for the compass heading ``h_rad`` (module docstring).
 
         Parameters
@@ -179,29 +187,11 @@ class CompassModel:
             The measured attitude (its pitch and roll place the compass's forward axis).
         sigma_rad : float
             Heading sigma.
-        p_ned_m : ndarray, shape (3,)
-            The pose's initial position (see :func:`heading_factor`).
         """
         M = np.asarray(self.R_body_compass, dtype=float)
-        if not self.estimate:
-            target = float(self.heading_target(np.array(h_rad)))
-            return heading_factor(key, target, R_ned_body_measured @ M, M, sigma_rad, p_ned_m)
-        noise = gtsam.noiseModel.Isotropic.Sigma(1, sigma_rad)
-        phi = fourier_design(np.array([h_rad]), self.harmonics)[0]
-        base = float(wrap_angle(h_rad + self.declination_rad))
-
-        def estimated(
-            this: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None
-        ) -> np.ndarray:
-            keys = this.keys()
-            R = values.atPose3(keys[0]).rotation().matrix() @ M
-            x = values.atVector(keys[1])
-            if H is not None:
-                H[0] = np.concatenate([yaw_jacobian(R) @ M.T, np.zeros(3)])[None, :]
-                H[1] = -phi[None, :]
-            return np.array([wrap_angle(math.atan2(R[1, 0], R[0, 0]) - base - phi @ x)])
-
-        return gtsam.CustomFactor(noise, [key, COEFFICIENTS_KEY], estimated)
+        target = float(self.heading_target(np.array(h_rad)))
+        phi = fourier_design(np.array([h_rad]), self.harmonics)[0] if self.estimate else None
+        return heading_factor(key, target, R_ned_body_measured @ M, M, sigma_rad, phi)
 
     def coefficient_prior(self) -> gtsam.PriorFactorVector:
         """The prior on ``x = [a0, a1, b1, ...]``: zero mean, ``a0_prior_sigma_rad`` and the harmonics'."""

@@ -35,9 +35,9 @@ Factors
 - **Depth** (:func:`position_factor` on the down coordinate only): pressure depth of the reference
   point (TEOS-10, lever arm removed), less the tide when a tide model is given (DESIGN section 4:
   depth below the datum), sigma the pressure sensor's.
-- **Compass heading** (:mod:`auvnav.slam.compass`: a prior on the heading, or a Python factor that
-  joins the deviation's coefficients): raw, corrected by a given correction, or with the deviation's
-  coefficients estimated. Its sigma is an option; by default the
+- **Compass heading** (:func:`auvnav.slam.compass.heading_factor`, one factor for every mode: exact
+  for any heading error, blind to roll and pitch): raw, corrected by a given correction, or joined
+  to the deviation's coefficients when they are estimated. Its sigma is an option; by default the
   compass's (``vehicle.heading_sigma_rad``) times :data:`HEADING_INFLATION` for a raw compass (the
   paper's "artificially large heading measurement noise": the headings come from the imagery and
   the compass's bias does not leak into them), and the compass's own with a correction or when
@@ -64,11 +64,12 @@ Non-Convexity for Robust Spatial Perception", IEEE RA-L 5(2)): the kernel's thre
 :data:`GRADUATED_SCALES` ``[0]`` times its final value, so that every loop closure but the grossest
 pulls quadratically while dead reckoning is metres off, and shrinks stage by stage, each stage
 starting from the last one's solution. (GTSAM's ``GncLMOptimizer`` classifies as well but runs a
-full solve per step of its schedule, dozens of them: minutes for a navigation check dive.) With the
-deviation estimated the loop runs in Python (:func:`_lm`): GTSAM's optimisers would hand the Python
-compass factors a copy of every value at every call. Incremental (what a vehicle would run): iSAM2,
-pose by pose with every factor that joins it to the poses before it, the chosen kernel throughout
-(each new loop closure meets an estimate that the earlier ones already corrected).
+full solve per step of its schedule, dozens of them: minutes for a navigation check dive.)
+
+Incremental (what a vehicle would run): iSAM2, ``poses_per_update`` poses per update
+(:data:`DEFAULT_POSES_PER_UPDATE`; 1 is pose by pose), each with every factor that joins it to the
+poses before it, the chosen kernel throughout (each new loop closure meets an estimate that the
+earlier ones already corrected).
 
 Marginal covariances of the poses come from ``gtsam.Marginals`` on the solved graph (robust factors
 at their final weights, the rejected loop closures left out); ``marginal_every`` > 1 computes every
@@ -96,7 +97,7 @@ from auvnav.dive import Dive
 from auvnav.errors import DiveFormatError, InsufficientDataError, Problem
 from auvnav.frames import FloatArray, euler2rot, rot2euler, se3, wrap_angle
 from auvnav.nav import FilterConfig, NavInputs, dead_reckon
-from auvnav.slam.compass import COEFFICIENTS_KEY, UNMEASURED_SIGMA_M, CompassModel
+from auvnav.slam.compass import COEFFICIENTS_KEY, CompassModel
 from auvnav.slam.g2o import PoseGraph
 from auvnav.slam.solve import PoseGraphSolveError, robust_threshold
 from auvnav.streams import Field, read_table
@@ -121,8 +122,15 @@ ODOMETRY_TILT_FACTOR = 5.0
 #: The batch solve's robust kernel thresholds, in units of the final one: graduated from residuals of
 #: metres (dead reckoning's) down to the chi-square threshold.
 GRADUATED_SCALES = (64.0, 8.0, 1.0)
+#: Poses per iSAM2 update by default: an update every 10 s for a camera triggered at 1 Hz
+#: (benchmarks/bench_slam.py: the per-pose cost falls almost as 1/K, an update's cost being that of
+#: re-eliminating the top of the Bayes tree whatever the poses it adds).
+DEFAULT_POSES_PER_UPDATE = 10
 #: Huber threshold of the GPS and USBL factors, whitened (sigmas).
 FIX_HUBER_K = 3.0
+#: Sigma of a coordinate a position factor does not measure (a fix's depth, the pressure depth's north
+#: and east): infinite, so GTSAM whitens its row to zero (no information, no chi-square).
+UNMEASURED_SIGMA_M = math.inf
 
 _IMAGE_TIMES_FIELDS = (Field("t_s", ("t",)),)
 # GTSAM's Pose3 tangent is (rotation, translation); g2o's and the loop file's translation first.
@@ -151,7 +159,9 @@ class SlamOptions:
     robust_k : float or None
         Its threshold on the whitened residual norm (None: the back end's chi-square default).
     incremental : bool
-        iSAM2 pose by pose instead of batch Levenberg-Marquardt.
+        iSAM2 instead of batch Levenberg-Marquardt.
+    poses_per_update : int
+        With ``incremental``: poses added per iSAM2 update (1: pose by pose).
     max_iterations : int
         Levenberg-Marquardt iteration limit (per stage).
     aux_period_s : float
@@ -168,6 +178,7 @@ class SlamOptions:
     robust: Robust = "cauchy"
     robust_k: float | None = None
     incremental: bool = False
+    poses_per_update: int = DEFAULT_POSES_PER_UPDATE
     max_iterations: int = 100
     aux_period_s: float = 1.0
     attitude_window_s: float = 1.0
@@ -178,9 +189,15 @@ class SlamOptions:
             raise ValueError(f"compass_sigma_rad must be positive; found {self.compass_sigma_rad}")
         if self.robust not in ("none", "huber", "cauchy"):
             raise ValueError(f"robust must be none, huber or cauchy; found {self.robust!r}")
-        if self.harmonics < 0 or self.max_iterations < 1 or self.marginal_every < 0:
+        if (
+            self.harmonics < 0
+            or self.max_iterations < 1
+            or self.marginal_every < 0
+            or self.poses_per_update < 1
+        ):
             raise ValueError(
-                "harmonics, max_iterations and marginal_every must be non-negative (iterations >= 1)"
+                "harmonics and marginal_every must be non-negative, max_iterations and poses_per_update "
+                "positive"
             )
         if not (self.aux_period_s > 0 and self.attitude_window_s >= 0):
             raise ValueError("aux_period_s must be positive and attitude_window_s non-negative")
@@ -466,9 +483,9 @@ def position_factor(
 ) -> gtsam.GPSFactorArm:
     """A position measurement of a point on the body: GTSAM's ``GPSFactorArm``, ``e = t + R l - p``.
 
-    A coordinate the sensor does not measure gets :data:`UNMEASURED_SIGMA_M` (its measured value is
-    then the initial guess's, and its residual costs nothing measurable): the pressure depth measures
-    only the down coordinate, a fix only north and east.
+    A coordinate the sensor does not measure gets :data:`UNMEASURED_SIGMA_M` (its measured value,
+    the initial guess's, then does not matter): the pressure depth measures only the down
+    coordinate, a fix only north and east.
 
     Parameters
     ----------
@@ -476,7 +493,7 @@ def position_factor(
     p_ned_m : ndarray, shape (3,)
         Measured position of the point, metres, local NED.
     sigma_ned_m : ndarray, shape (3,)
-        1-sigma per axis, metres.
+        1-sigma per axis, metres (:data:`UNMEASURED_SIGMA_M` where not measured).
     lever_body_m : ndarray, shape (3,), optional
         The point relative to the reference point, body FRD (default: the reference point).
     huber_k : float, optional
@@ -721,9 +738,7 @@ def build_graph(
         factors.add(
             "compass",
             k,
-            compass.factor(
-                key, float(meas.compass_heading_rad[k]), meas.R_ned_body[k], heading_sigma, initial[k, :3, 3]
-            ),
+            compass.factor(key, float(meas.compass_heading_rad[k]), meas.R_ned_body[k], heading_sigma),
         )
 
     # Position fixes at their poses (merged within MERGE_S of an image time), north and east.
@@ -866,48 +881,16 @@ class SlamSolution:
 
 
 def _lm(
-    graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, max_iterations: int, *, python_factors: bool
+    graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, max_iterations: int
 ) -> tuple[gtsam.Values, int]:
-    """Levenberg-Marquardt: GTSAM's, or driven from Python when the graph holds Python factors.
-
-    GTSAM's optimisers keep their values in C++, and every call of a Python ``CustomFactor`` then
-    receives a copy of all of them: a cost of the order of P^2 per iteration (minutes for a dive).
-    Called from Python on Python-held values the same factors cost microseconds, so with the
-    estimated compass the loop runs here: linearise, damp every variable with ``lambda I`` (GTSAM's
-    default damping, initial lambda 1e-5, factor 10), solve (multifrontal, COLAMD), accept a step
-    that lowers the error, stop when the relative decrease is under 1e-5 (GTSAM's defaults).
-    """
-    if not python_factors:
-        params = gtsam.LevenbergMarquardtParams()
-        params.setMaxIterations(max_iterations)
-        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, params)
-        try:
-            return optimizer.optimize(), int(optimizer.iterations())
-        except RuntimeError as err:
-            raise PoseGraphSolveError(f"SLAM solve failed: {_one_line(err)}") from None
-    dims = values.dims()
-    lam, error = 1e-5, graph.error(values)
-    for iteration in range(1, max_iterations + 1):
-        linear = graph.linearize(values)
-        while True:
-            damped = linear.clone()
-            for key, d in dims.items():
-                damped.add(key, math.sqrt(lam) * np.eye(d), np.zeros(d), gtsam.noiseModel.Unit.Create(d))
-            try:
-                trial = values.retract(damped.optimize())
-            except RuntimeError as err:
-                raise PoseGraphSolveError(f"SLAM solve failed: {_one_line(err)}") from None
-            trial_error = graph.error(trial)
-            if trial_error <= error:
-                break
-            lam *= 10.0
-            if lam > 1e10:
-                return values, iteration
-        decrease = error - trial_error
-        values, error, lam = trial, trial_error, max(lam / 10.0, 1e-10)
-        if decrease <= 1e-5 * error:
-            return values, iteration
-    return values, max_iterations
+    """GTSAM's Levenberg-Marquardt (default parameters but the iteration limit)."""
+    params = gtsam.LevenbergMarquardtParams()
+    params.setMaxIterations(max_iterations)
+    optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, params)
+    try:
+        return optimizer.optimize(), int(optimizer.iterations())
+    except RuntimeError as err:
+        raise PoseGraphSolveError(f"SLAM solve failed: {_one_line(err)}") from None
 
 
 def _one_line(err: Exception) -> str:
@@ -915,34 +898,46 @@ def _one_line(err: Exception) -> str:
     return " ".join(str(err).strip().split("\n\n")[0].split())
 
 
-def _isam2(sg: SensorGraph) -> tuple[gtsam.Values, int]:
-    """iSAM2 pose by pose with every factor that joins it to earlier poses."""
+def _isam2(sg: SensorGraph, poses_per_update: int) -> tuple[gtsam.Values, int]:
+    """iSAM2, ``poses_per_update`` poses per update, each with every factor that joins it to earlier poses.
+
+    A new pose's initial guess is the previous pose's (its estimate, or its prediction when it waits
+    in the same update) composed with their DVL odometry.
+    """
     params = gtsam.ISAM2Params()
-    params.setFactorization("QR")  # Cholesky meets indefinite pivots with the loose heading priors
+    # Cholesky (no damping in iSAM2) reports an indeterminate system on dive graphs; QR does not.
+    params.setFactorization("QR")
     isam = gtsam.ISAM2(params)
     order = np.argsort(sg.last_pose, kind="stable")
     bounds = np.searchsorted(sg.last_pose[order], np.arange(-1, len(sg.times) + 1))
+    P = len(sg.times)
     current = sg.initial[0]
-    for k in range(len(sg.times)):
+    updates = 0
+    for first in range(0, P, poses_per_update):
         new_factors = gtsam.NonlinearFactorGraph()
         new_values = gtsam.Values()
-        if k == 0:
+        if first == 0:
             for f in order[bounds[0] : bounds[1]]:  # the coefficients' prior
                 new_factors.add(sg.factors[f])
             if sg.compass.estimate:
                 new_values.insert(COEFFICIENTS_KEY, np.zeros(sg.compass.n_coefficients))
-        else:
-            current = current @ sg.pose_graph.T_ij[k - 1]  # predict with the odometry
-        new_values.insert(pose_key(k), gtsam.Pose3(current))
-        for f in order[bounds[k + 1] : bounds[k + 2]]:
-            new_factors.add(sg.factors[f])
+        last = min(first + poses_per_update, P) - 1
+        for k in range(first, last + 1):
+            if k > 0:
+                current = current @ sg.pose_graph.T_ij[k - 1]  # predict with the odometry
+            new_values.insert(pose_key(k), gtsam.Pose3(current))
+            for f in order[bounds[k + 1] : bounds[k + 2]]:
+                new_factors.add(sg.factors[f])
         try:
             isam.update(new_factors, new_values)
-            current = isam.calculateEstimatePose3(pose_key(k)).matrix()
+            current = isam.calculateEstimatePose3(pose_key(last)).matrix()
         except RuntimeError as err:
-            raise PoseGraphSolveError(f"iSAM2 failed adding pose {k}: {_one_line(err)}") from None
+            raise PoseGraphSolveError(
+                f"iSAM2 failed adding poses {first} to {last}: {_one_line(err)}"
+            ) from None
+        updates += 1
     isam.update()
-    return isam.calculateEstimate(), len(sg.times)
+    return isam.calculateEstimate(), updates
 
 
 def solve(sg: SensorGraph, options: SlamOptions) -> SlamSolution:
@@ -952,14 +947,14 @@ def solve(sg: SensorGraph, options: SlamOptions) -> SlamSolution:
     graph = sg.graph()
     cost_before = 2.0 * float(graph.error(values0))
     if options.incremental:
-        values, iterations = _isam2(sg)
+        values, iterations = _isam2(sg, options.poses_per_update)
         method = "isam2"
     else:
         values, iterations = values0, 0
         scales = GRADUATED_SCALES if options.robust != "none" else (1.0,)
         for scale in scales:
             stage = sg.graph(options.robust, scale) if scale != 1.0 else graph
-            values, n = _lm(stage, values, options.max_iterations, python_factors=sg.compass.estimate)
+            values, n = _lm(stage, values, options.max_iterations)
             iterations += n
         method = "lm"
     seconds = time.perf_counter() - start

@@ -33,6 +33,7 @@ from auvnav.nav import nav_inputs
 from auvnav.slam.compass import CompassModel
 from auvnav.slam.g2o import write_g2o
 from auvnav.slam.graph import (
+    DEFAULT_POSES_PER_UPDATE,
     PoseMarginals,
     SlamOptions,
     SlamSolution,
@@ -258,6 +259,7 @@ def run_slam(
     compass_correction: Path | None = None,
     estimate_compass: bool = False,
     incremental: bool = False,
+    poses_per_update: int = DEFAULT_POSES_PER_UPDATE,
     tide: Path | None = None,
     compass_sigma_deg: float | None = None,
     harmonics: int = 3,
@@ -278,6 +280,8 @@ def run_slam(
         Estimate the deviation in the graph; writes ``compass_correction.yaml``.
     incremental : bool
         iSAM2 instead of batch Levenberg-Marquardt.
+    poses_per_update : int
+        With ``incremental``: poses per iSAM2 update.
     tide : Path, optional
         A tide constituent file; the pressure depth is corrected to depth below the datum.
     compass_sigma_deg : float, optional
@@ -312,6 +316,7 @@ def run_slam(
         harmonics=harmonics,
         robust=robust,  # type: ignore[arg-type]
         incremental=incremental,
+        poses_per_update=poses_per_update,
         marginal_every=marginal_every,
     )
     result = slam(

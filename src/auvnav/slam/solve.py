@@ -82,7 +82,10 @@ class SolveResult:
     method : str
         ``"lm"``, ``"gn"`` or ``"isam2"``.
     step_seconds : ndarray, shape (N,)
-        Incremental solves only: wall time of adding each pose (with its edges), seconds; else empty.
+        Incremental solves only: wall time per added pose (its update's time divided by the poses
+        that update added), seconds; else empty.
+    update_seconds : ndarray, shape (U,)
+        Incremental solves only: wall time of each iSAM2 update, seconds; else empty.
     """
 
     graph: PoseGraph
@@ -95,6 +98,7 @@ class SolveResult:
     robust: str
     method: str
     step_seconds: FloatArray = field(default_factory=lambda: np.zeros(0))
+    update_seconds: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     def __post_init__(self) -> None:
         if np.shape(self.edge_chi2) != (self.graph.n_edges,):
@@ -399,15 +403,19 @@ def optimize_incremental(
     *,
     robust: Robust = "none",
     robust_k: float | None = None,
+    poses_per_update: int = 1,
     relinearize_threshold: float = 0.1,
     relinearize_skip: int = 10,
 ) -> SolveResult:
-    """Solve a pose graph incrementally with iSAM2, one pose at a time (what a vehicle would run).
+    """Solve a pose graph incrementally with iSAM2 (what a vehicle would run).
 
-    Poses are added in id order. Each step adds the next pose with every edge that joins it to a pose
-    already in the graph, then updates iSAM2 and reads the new pose's estimate. The new pose's initial
-    guess is the current estimate of its latest neighbour composed with their edge (dead reckoning
-    from the current solution), so the file's vertices are used for the first pose only.
+    Poses are added in id order, each with every edge that joins it to a pose added before it or
+    with it; every ``poses_per_update`` poses go to iSAM2 in one update, after which the newest
+    pose's estimate is read (a vehicle that triggers its camera at 1 Hz and updates every K poses
+    has a new solution every K seconds). A new pose's initial guess is its latest neighbour's
+    current estimate (its prediction, when the neighbour waits in the same update) composed with
+    their edge: dead reckoning from the current solution, so the file's vertices are used for the
+    first pose only.
 
     Parameters
     ----------
@@ -415,6 +423,8 @@ def optimize_incremental(
         The graph; every pose but the first needs an edge to a pose with a lower id.
     robust, robust_k
         As for :func:`optimize_batch`.
+    poses_per_update : int
+        Poses per iSAM2 update, K >= 1 (1: pose by pose).
     relinearize_threshold : float
         iSAM2 relinearises a variable whose delta exceeds this (radians and file units; GTSAM's
         default 0.1).
@@ -424,9 +434,11 @@ def optimize_incremental(
     Returns
     -------
     SolveResult
-        ``method="isam2"``; ``step_seconds[r]`` is the time to add the pose in row r (building its
-        factors, the iSAM2 update and reading its estimate); ``cost_before`` is the chi-square at
-        the graph's own poses; ``iterations`` counts iSAM2 updates.
+        ``method="isam2"``; ``update_seconds[u]`` is the wall time of update ``u`` (building its
+        factors, the iSAM2 update and reading its newest pose's estimate) and ``step_seconds[r]``
+        the time per added pose of the update that added the pose in row r (its update's time
+        divided by the poses it added); ``cost_before`` is the chi-square at the graph's own poses;
+        ``iterations`` counts iSAM2 updates.
 
     Raises
     ------
@@ -435,6 +447,8 @@ def optimize_incremental(
     PoseGraphSolveError
         When iSAM2 fails.
     """
+    if poses_per_update < 1:
+        raise ValueError(f"poses_per_update must be at least 1; found {poses_per_update}")
     rows_i, rows_j = graph.rows(graph.edge_i), graph.rows(graph.edge_j)
     step = np.maximum(rows_i, rows_j)
     orphans = np.setdiff1d(np.arange(1, graph.n_poses), step)
@@ -452,48 +466,55 @@ def optimize_incremental(
     at = isam.calculateEstimatePose2 if graph.dim == 2 else isam.calculateEstimatePose3
     order = np.argsort(step, kind="stable")
     bounds = np.searchsorted(step[order], np.arange(graph.n_poses + 1))
-    step_seconds = np.zeros(graph.n_poses)
-    for r in range(graph.n_poses):
+    first_rows = np.arange(0, graph.n_poses, poses_per_update)
+    update_seconds = np.zeros(len(first_rows))
+    for u, first in enumerate(first_rows):
         t0 = time.perf_counter()
         new_factors = gtsam.NonlinearFactorGraph()
         new_values = gtsam.Values()
-        key = int(graph.ids[r])
-        if r == 0:
-            new_factors.add(_anchor(graph, graph.T_world_pose[0]))
-            new_values.insert(key, _pose_to_gtsam(graph.T_world_pose[0]))
-        edges = order[bounds[r] : bounds[r + 1]]
-        for e in edges:
-            new_factors.add(factors[e])
-        if r > 0:
-            # Predict from the latest neighbour: the odometry edge when there is one.
-            e = edges[np.argmax(np.minimum(rows_i[edges], rows_j[edges]))]
-            forward = rows_j[e] == r
-            other = int(graph.edge_i[e] if forward else graph.edge_j[e])
-            T_rel = graph.T_ij[e] if forward else inverse_rigid(graph.T_ij[e])
-            new_values.insert(key, _pose_to_gtsam(at(other).matrix() @ T_rel))
+        predicted: dict[int, FloatArray] = {}  # poses of this update, by row
+        last = min(first + poses_per_update, graph.n_poses) - 1
+        for r in range(first, last + 1):
+            edges = order[bounds[r] : bounds[r + 1]]
+            for e in edges:
+                new_factors.add(factors[e])
+            if r == 0:
+                new_factors.add(_anchor(graph, graph.T_world_pose[0]))
+                predicted[r] = graph.T_world_pose[0]
+            else:
+                # Predict from the latest neighbour: the odometry edge when there is one.
+                e = edges[np.argmax(np.minimum(rows_i[edges], rows_j[edges]))]
+                forward = rows_j[e] == r
+                other = int(rows_i[e] if forward else rows_j[e])
+                T_other = predicted[other] if other in predicted else at(int(graph.ids[other])).matrix()
+                predicted[r] = T_other @ (graph.T_ij[e] if forward else inverse_rigid(graph.T_ij[e]))
+            new_values.insert(int(graph.ids[r]), _pose_to_gtsam(predicted[r]))
         try:
             isam.update(new_factors, new_values)
-            at(key)
+            at(int(graph.ids[last]))
         except RuntimeError as err:
             raise PoseGraphSolveError(
-                f"{graph.source or 'pose graph'}: iSAM2 failed adding vertex {key}: {_one_line(err)}"
+                f"{graph.source or 'pose graph'}: iSAM2 failed adding vertices {graph.ids[first]} to "
+                f"{graph.ids[last]}: {_one_line(err)}"
             ) from None
-        step_seconds[r] = time.perf_counter() - t0
+        update_seconds[u] = time.perf_counter() - t0
     values = isam.calculateEstimate()
     seconds = time.perf_counter() - start
     plain = _between_factors(graph)
     edge_chi2 = _edge_chi2(plain, values)
+    sizes = np.diff(np.append(first_rows, graph.n_poses))
     return SolveResult(
         graph=graph.with_poses(_poses_from_values(graph, values)),
         cost_before=float(_edge_chi2(plain, _values(graph)).sum()),
         cost_after=float(edge_chi2.sum()),
-        iterations=graph.n_poses,
+        iterations=len(first_rows),
         seconds=seconds,
         edge_chi2=edge_chi2,
         rejected=_rejected(graph, edge_chi2, robust, robust_k),
         robust=robust,
         method="isam2",
-        step_seconds=step_seconds,
+        step_seconds=np.repeat(update_seconds / sizes, sizes),
+        update_seconds=update_seconds,
     )
 
 
