@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
@@ -34,6 +33,7 @@ from numpy.typing import NDArray
 
 from auvnav.dive import ImageIndex
 from auvnav.frames import se3, se3_inverse
+from auvnav.parallel import process_pool
 from auvnav.sim.texture import SeafloorTexture
 from auvnav.streams import write_stream
 from auvnav.trajectory import Trajectory
@@ -427,7 +427,7 @@ def render_images(
             if progress:
                 progress(k + 1, total)
     else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
+        with process_pool(workers) as pool:
             futures = [pool.submit(_render_one, job, k, poses[k]) for k in range(total)]
             for done, fut in enumerate(futures, 1):
                 fut.result()

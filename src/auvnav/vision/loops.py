@@ -30,13 +30,12 @@ import json
 import logging
 import time
 from collections.abc import Callable, Iterable
-from concurrent.futures import Executor, ProcessPoolExecutor
+from concurrent.futures import Executor
 from dataclasses import asdict, dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
@@ -44,6 +43,7 @@ from scipy.stats import chi2
 from auvnav.dive import Dive, ImageIndex
 from auvnav.errors import ConfigError, InsufficientDataError
 from auvnav.frames import angle_diff, euler2rot, rot2euler, se3, se3_inverse, wrap_angle
+from auvnav.parallel import process_pool
 from auvnav.streams import write_json
 from auvnav.trajectory import Trajectory, read_trajectory
 from auvnav.vehicle import StereoRig
@@ -199,11 +199,6 @@ def _features_task(ctx: _Context, items: list[tuple[int, str, str]]) -> list[tup
     return out
 
 
-def _worker_init() -> None:
-    """One OpenCV thread per worker process: the pool already uses every core."""
-    cv2.setNumThreads(1)
-
-
 @lru_cache(maxsize=512)
 def _load(path: str) -> StereoFeatures:
     with np.load(path) as z:
@@ -301,6 +296,11 @@ def read_prior(dive_path: Path) -> Trajectory:
     )
 
 
+@lru_cache(maxsize=4)
+def _chi2_2dof(probability: float) -> float:
+    return float(chi2.ppf(probability, 2))
+
+
 def _prior_check(
     v: Verification, fp: Footprints, centre: FloatArray, sigma: float, settings: LoopSettings
 ) -> str:
@@ -312,7 +312,7 @@ def _prior_check(
     measured = fp.measured_displacement(np.array([v.i]), np.array([v.j]), v.pose6[None, :])[0]
     err = measured - (centre[v.j] - centre[v.i])
     sigma = float(np.hypot(sigma, measurement_sigma(measured[None, :])[0]))
-    if float(err @ err) / sigma**2 > chi2.ppf(settings.prior_gate_probability, 2):
+    if float(err @ err) / sigma**2 > _chi2_2dof(settings.prior_gate_probability):
         return f"disagrees with the prior ({np.linalg.norm(err):.2f} m off, sigma {sigma:.2f} m)"
     dyaw = angle_diff(v.pose6[5], angle_diff(fp.yaw_rad[v.j], fp.yaw_rad[v.i]))
     if abs(dyaw) > settings.max_heading_disagreement_rad:
@@ -373,7 +373,7 @@ def find_loops(
     cache_dir.mkdir(parents=True, exist_ok=True)
     ctx = _Context(dive.path / "images", rig, rectification(rig), settings, cache_dir)
     started = time.perf_counter()
-    pool = None if workers == 1 else ProcessPoolExecutor(max_workers=workers, initializer=_worker_init)
+    pool = None if workers == 1 else process_pool(workers)
     try:
         items = [(int(k), str(images.left[k]), str(images.right[k])) for k in index]
         feats = _run(pool, _features_task, ctx, items, 4, "features", progress)
@@ -424,7 +424,8 @@ def find_loops(
                 tested[(v.i, v.j)] = v
             _refit(drift, fp_u, tested)
             ci, cj, _ = candidate_pairs(fp_u, drift, settings.candidates, exclude=set(tested))
-            todo = _limit_per_image(ci, cj, settings.per_image_per_round)
+            # Verified in image order: a worker's chunk then shares feature files (its cache).
+            todo = sorted(_limit_per_image(ci, cj, settings.per_image_per_round))
         if todo:
             log.warning("stopped after %d rounds with %d candidates untested", rounds, len(todo))
     finally:
