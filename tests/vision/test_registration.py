@@ -15,6 +15,7 @@ from auvnav.vision.candidates import (
     disc_overlap,
     overlap_distance,
     overlap_probability,
+    reach_distance,
 )
 from auvnav.vision.features import match_descriptors
 from auvnav.vision.registration import Registration, RegistrationSettings, _expm_so3, register
@@ -119,6 +120,19 @@ def test_overlap_probability_matches_monte_carlo() -> None:
     assert overlap_probability(np.array([mu]), np.array([sigma]), np.array([d_max]))[0] == pytest.approx(
         expected, abs=0.005
     )
+
+
+@pytest.mark.parametrize("p_min", [0.01, 0.1, 0.5])
+def test_no_pair_beyond_the_reach_distance_can_be_a_candidate(p_min: float) -> None:
+    d_max = 1.0
+    reach = reach_distance(d_max, p_min)
+    sigma = np.geomspace(1e-3, 100.0, 4001)
+    beyond = overlap_probability(np.full_like(sigma, reach), sigma, d_max)
+    assert beyond.max() < p_min
+    # ... and the bound is tight: a little closer, some uncertainty reaches p_min.
+    inside = overlap_probability(np.full_like(sigma, 0.95 * reach), sigma, d_max)
+    assert inside.max() >= p_min
+    assert reach > d_max
 
 
 def test_drift_model_grows_with_time_and_shrinks_at_loops() -> None:

@@ -20,14 +20,15 @@ error over a leg, direction changes at turns. Verified loop closures measure ``c
 batch linear least-squares fit gives the corrected prior and the posterior covariance of every
 relative displacement, so the candidate search tightens as loops are found (:mod:`auvnav.vision.loops`).
 
-The search (:func:`candidate_pairs`) uses a k-d tree: pairs whose relative uncertainty is so large that
-they could not reach ``p_min`` are never considered, which bounds the search radius, and the work grows
-like ``N log N`` plus the pairs within that radius.
+The search (:func:`candidate_pairs`) uses a k-d tree: pairs whose prior distance is so large that no
+uncertainty could give them ``p_min`` are never considered (:func:`reach_distance`, about twice the
+overlap distance), and the work grows like ``N log N`` plus the pairs within that radius.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
@@ -243,6 +244,23 @@ class DriftModel:
         return np.sqrt(np.maximum(var, 0.0) + self.sigma_floor_m**2)
 
 
+@lru_cache(maxsize=16)
+def reach_distance(d_max_m: float, p_min: float) -> float:
+    """The largest prior distance between two footprint centres at which the probability of their
+    overlap (:func:`overlap_probability`) can still reach ``p_min``, whatever the uncertainty.
+
+    For each ``sigma`` the probability falls as the distance grows, and it reaches ``p_min`` at zero
+    distance only while ``sigma <= d_max / sqrt(-2 ln(1 - p_min))``; the largest distance at which it
+    still reaches ``p_min``, over those ``sigma``, bounds the neighbour search (about twice
+    ``d_max`` for ``p_min = 0.1``). Found on a grid, plus a margin of a grid step and 2% of ``d_max``.
+    """
+    sigma_cap = d_max_m / np.sqrt(-2.0 * np.log1p(-p_min))
+    sigma = np.linspace(sigma_cap / 400, sigma_cap, 400)[:, None]
+    mu = np.linspace(0.0, d_max_m + 5.0 * sigma_cap, 2001)
+    reaches = (overlap_probability(mu[None, :], sigma, d_max_m) >= p_min).any(axis=0)
+    return float(mu[reaches].max() + (mu[1] - mu[0]) + 0.02 * d_max_m)
+
+
 def candidate_pairs(
     fp: Footprints,
     drift: DriftModel,
@@ -259,23 +277,19 @@ def candidate_pairs(
     """
     rho = overlap_distance(settings.min_overlap)
     centre = fp.centre_ne_m + drift.correction(fp.t_s)
-    r_max = float(fp.radius_m.max())
-    d_max_all = rho * r_max
-    # Beyond this sigma no pair reaches p_min even when the prior puts it at zero distance.
-    sigma_cap = d_max_all / np.sqrt(-2.0 * np.log1p(-settings.p_min))
-    radius = d_max_all + 5.0 * sigma_cap
+    radius = reach_distance(rho * float(fp.radius_m.max()), settings.p_min)
     pairs = cKDTree(centre).query_pairs(radius, output_type="ndarray")
     empty = (np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0))
     if len(pairs) == 0:
         return empty
     pairs = np.sort(pairs, axis=1)
-    pairs = pairs[pairs[:, 1] - pairs[:, 0] > 1]
-    if exclude:
-        keep = np.array([(int(a), int(b)) not in exclude for a, b in pairs], dtype=bool)
-        pairs = pairs[keep] if len(pairs) else pairs
-    if len(pairs) == 0:
-        return empty
     i, j = pairs[:, 0], pairs[:, 1]
+    keep = j - i > 1
+    if exclude:
+        n = len(centre)
+        done = np.fromiter((a * n + b for a, b in exclude), dtype=np.int64, count=len(exclude))
+        keep &= ~np.isin(i.astype(np.int64) * n + j, done)
+    i, j = i[keep], j[keep]
     sigma = drift.relative_sigma(fp.t_s[i], fp.t_s[j])
     mu = np.linalg.norm(centre[j] - centre[i], axis=1)
     d_max = rho * 0.5 * (fp.radius_m[i] + fp.radius_m[j])

@@ -45,6 +45,27 @@ MIN_OVERLAP = 0.3
 CORRECT_TRANSLATION_M = 0.05
 CORRECT_ROTATION_DEG = 1.0
 CORRECT_PROBABILITY = 0.999
+OVERLAP_CHUNK = 4096  # pairs projected at once: cv2.projectPoints also fills its Jacobian, 15 doubles a row
+
+
+def _near_pairs(
+    centre: FloatArray, reach: FloatArray, chunk: int = 1024
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Pairs ``i < j`` of footprints whose centres are within their two reaches, found a chunk of
+    images at a time (a few high-altitude images must not make every image search their radius)."""
+    tree = cKDTree(centre)
+    r_max = float(reach.max())
+    out_i, out_j = [], []
+    for start in range(0, len(centre), chunk):
+        rows = np.arange(start, min(start + chunk, len(centre)))
+        found = tree.query_ball_point(centre[rows], reach[rows] + r_max, return_sorted=False)
+        counts = np.array([len(f) for f in found])
+        a = np.repeat(rows, counts)
+        b = np.fromiter((k for f in found for k in f), dtype=np.intp, count=int(counts.sum()))
+        keep = (b > a) & (np.linalg.norm(centre[a] - centre[b], axis=1) <= reach[a] + reach[b])
+        out_i.append(a[keep])
+        out_j.append(b[keep])
+    return np.concatenate(out_i), np.concatenate(out_j)
 
 
 def true_overlaps(
@@ -74,11 +95,8 @@ def true_overlaps(
     s = (floor_down_m - c[:, 2])[:, None] / np.maximum(rays[..., 2], 1e-3)
     ground = c[:, None, :] + s[..., None] * rays  # (N, S, 3)
     centre = ground.mean(axis=1)[:, :2]
-    reach = float(np.max(np.linalg.norm(ground[..., :2] - centre[:, None, :], axis=2)))
-    pairs = cKDTree(centre).query_pairs(2 * reach, output_type="ndarray")
-    if len(pairs) == 0:
-        return np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0)
-    i, j = np.sort(pairs, axis=1).T
+    reach = np.max(np.linalg.norm(ground[..., :2] - centre[:, None, :], axis=2), axis=1)
+    i, j = _near_pairs(centre, reach)
 
     def seen(a: NDArray[np.intp], b: NDArray[np.intp]) -> FloatArray:
         T_cam_ned = se3_inverse(T_ned_cam[b])
@@ -96,7 +114,10 @@ def true_overlaps(
         inside &= (uv[..., 1] >= -0.5) & (uv[..., 1] <= cam.height - 0.5)
         return inside.mean(axis=1)
 
-    overlap = 0.5 * (seen(i, j) + seen(j, i))
+    overlap = np.empty(len(i))
+    for k in range(0, len(i), OVERLAP_CHUNK):  # bounded memory: (chunk, samples, 3) at a time
+        a, b = i[k : k + OVERLAP_CHUNK], j[k : k + OVERLAP_CHUNK]
+        overlap[k : k + OVERLAP_CHUNK] = 0.5 * (seen(a, b) + seen(b, a))
     keep = overlap > 0
     return i[keep], j[keep], overlap[keep]
 

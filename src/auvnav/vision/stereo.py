@@ -96,9 +96,10 @@ def stereo_features(
 ) -> StereoFeatures:
     """Detect in the left image, find each keypoint in the right one along its epipolar line, and
     triangulate one stereo pair (grey uint8 images)."""
-    kl = detect(left, settings)
+    flat_left, flat_right = correct_illumination(left), correct_illumination(right)
+    kl = detect(flat_left, settings)
     rl = rectify_points(kl.uv_px, rig.left, rect.R1, rect.P1)
-    flat = rectify_images(correct_illumination(left), correct_illumination(right), rig, rect)
+    flat = rectify_images(flat_left, flat_right, rig, rect)
     rr, ok = track_right(rl, *flat, rect, settings)
     scale = settings.scale_for(left.shape[1])
     sigma_common, sigma_independent = split_noise(rr[ok, 1] - rl[ok, 1], settings.sigma_px / scale)
