@@ -4,25 +4,38 @@ Workers start from a clean single-threaded server process (the ``forkserver`` st
 forking the caller: a caller that has used OpenCV or BLAS runs their thread pools, and a child forked
 while one of those threads holds a lock waits on it for ever (observed: ``cv2.setNumThreads`` in a
 forked worker after ``cv2.stereoRectify`` in the parent). Each worker runs OpenCV on one thread, since
-the pool already uses every core.
+the pool already uses every core, and logs its warnings in its caller's format, since it does not
+inherit the caller's logging set-up (information from workers, such as libraries announcing their
+thread counts, is left out).
 """
 
 from __future__ import annotations
 
+import logging
 import multiprocessing
+import sys
 from concurrent.futures import ProcessPoolExecutor
 
 import cv2
 
 
-def _single_threaded() -> None:
+def _worker_init(level: int, formatter: logging.Formatter | None) -> None:
     cv2.setNumThreads(1)
+    handler = logging.StreamHandler(sys.stderr)
+    if formatter is not None:
+        handler.setFormatter(formatter)
+    root = logging.getLogger()
+    root.handlers = [handler]
+    root.setLevel(max(level, logging.WARNING))
 
 
 def process_pool(workers: int | None = None) -> ProcessPoolExecutor:
     """A pool of ``workers`` processes (None: one per core), safe to start from a threaded caller."""
+    root = logging.getLogger()
+    formatter = root.handlers[0].formatter if root.handlers else None
     return ProcessPoolExecutor(
         max_workers=workers,
         mp_context=multiprocessing.get_context("forkserver"),
-        initializer=_single_threaded,
+        initializer=_worker_init,
+        initargs=(root.getEffectiveLevel(), formatter),
     )
