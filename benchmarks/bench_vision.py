@@ -61,8 +61,12 @@ def render(dive: Path, scale: float, seconds: float | None) -> dict[str, float]:
     return {"rendered_pairs": len(images), "render_s": elapsed, "render_pairs_per_s": len(images) / elapsed}
 
 
-def loops(dive: Path, *, fresh: bool) -> dict[str, float]:
-    """Navigate (when needed), run the loop stage (from an empty cache when ``fresh``), evaluate."""
+def loops(dive: Path, usage: TreeUsage, *, fresh: bool) -> dict[str, float]:
+    """Navigate (when needed), run the loop stage (from an empty cache when ``fresh``), evaluate.
+
+    ``cores_busy_features`` and ``cores_busy_verify``: the stage's CPU time over its wall time and the
+    cores, for each phase (1: every core busy throughout).
+    """
     from auvnav.evaluate import read_truth
     from auvnav.vision.evaluate import loops_section
     from auvnav.vision.loops import run_loop_stage
@@ -72,14 +76,26 @@ def loops(dive: Path, *, fresh: bool) -> dict[str, float]:
     if fresh:
         shutil.rmtree(dive / "products" / "vision", ignore_errors=True)
     last = [0.0]
+    marks: dict[str, tuple[float, float]] = {}
 
     def progress(stage: str, done: int, total: int) -> None:
         now = time.perf_counter()
+        if stage not in marks:
+            marks[stage] = (now, usage.cpu_s())
+        if stage == "verify" and done == total:  # the end of a round (the pool's workers still live)
+            marks["end"] = (now, usage.cpu_s())
         if now - last[0] > 30 or done == total:
             print(f"  {stage} {done}/{total}", flush=True)
             last[0] = now
 
+    start = (time.perf_counter(), usage.cpu_s())
     summary = run_loop_stage(dive, progress=progress)
+    end = marks["end"]
+    cores = os.cpu_count() or 1
+    busy = {
+        "cores_busy_features": (marks["verify"][1] - start[1]) / (marks["verify"][0] - start[0]) / cores,
+        "cores_busy_verify": (end[1] - marks["verify"][1]) / (end[0] - marks["verify"][0]) / cores,
+    }
     truth = read_truth(dive)
     scores = loops_section(dive, truth, truth.distance_m()) or {}
     keep = (
@@ -93,21 +109,23 @@ def loops(dive: Path, *, fresh: bool) -> dict[str, float]:
     return {
         **{k: summary[k] for k in keep},
         "pairs_per_s": summary["pairs_per_s"],
+        **busy,
         "rejected": summary["rejected"],
         **scores,
     }
 
 
-class TreeMemory:
-    """Peak of the summed resident sets of this process and every descendant (the forkserver's pool
-    workers are not children that ``getrusage`` would see), sampled every half second on Linux."""
+class TreeUsage:
+    """This process and every descendant (the forkserver's pool workers are not children that
+    ``getrusage`` would see), on Linux: the peak of their summed resident sets, sampled every half
+    second, and their CPU time so far (:meth:`cpu_s`)."""
 
     def __init__(self) -> None:
         self.peak_mib = 0.0
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._sample, daemon=True)
 
-    def __enter__(self) -> TreeMemory:
+    def __enter__(self) -> TreeUsage:
         self._thread.start()
         return self
 
@@ -115,21 +133,40 @@ class TreeMemory:
         self._stop.set()
         self._thread.join()
 
+    @staticmethod
+    def _tree() -> list[int]:
+        parents: dict[int, list[int]] = {}
+        for entry in Path("/proc").iterdir():
+            if entry.name.isdigit():
+                try:
+                    ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+                except OSError:
+                    continue
+                parents.setdefault(ppid, []).append(int(entry.name))
+        todo, tree = [os.getpid()], []
+        while todo:
+            pid = todo.pop()
+            tree.append(pid)
+            todo += parents.get(pid, [])
+        return tree
+
+    def cpu_s(self) -> float:
+        """User and system CPU seconds of the live processes of the tree."""
+        tick = os.sysconf("SC_CLK_TCK")
+        total = 0.0
+        for pid in self._tree():
+            try:
+                fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            total += (int(fields[11]) + int(fields[12])) / tick
+        return total
+
     def _sample(self) -> None:
         page_mib = os.sysconf("SC_PAGE_SIZE") / 2**20
         while not self._stop.wait(0.5):
-            parents: dict[int, list[int]] = {}
-            for entry in Path("/proc").iterdir():
-                if entry.name.isdigit():
-                    try:
-                        ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-                    except OSError:
-                        continue
-                    parents.setdefault(ppid, []).append(int(entry.name))
-            todo, total = [os.getpid()], 0.0
-            while todo:
-                pid = todo.pop()
-                todo += parents.get(pid, [])
+            total = 0.0
+            for pid in self._tree():
                 try:
                     total += int(Path(f"/proc/{pid}/statm").read_text().split()[1]) * page_mib
                 except OSError:
@@ -149,14 +186,14 @@ def main() -> None:
     dive = args.work / "navcheck"
     results: dict[str, object] = {"image_scale": args.image_scale, "load_average": os.getloadavg()}
     results.update(render(dive, args.image_scale, None))
-    with TreeMemory() as memory:
-        results["half"] = loops(dive, fresh=True)
-    results["half_peak_memory_mib"] = memory.peak_mib
+    with TreeUsage() as usage:
+        results["half"] = loops(dive, usage, fresh=True)
+    results["half_peak_memory_mib"] = usage.peak_mib
     cut = args.work / f"navcheck-{args.speed_seconds:.0f}s-x1"
     results["full_render"] = render(cut, 1.0, args.speed_seconds)
-    with TreeMemory() as memory:
-        results["full"] = loops(cut, fresh=True)
-    results["full_peak_memory_mib"] = memory.peak_mib
+    with TreeUsage() as usage:
+        results["full"] = loops(cut, usage, fresh=True)
+    results["full_peak_memory_mib"] = usage.peak_mib
     results["load_average_end"] = os.getloadavg()
     (args.work / "results.json").write_text(json.dumps(results, indent=2, default=float), encoding="utf-8")
     print(json.dumps(results, indent=2, default=float))

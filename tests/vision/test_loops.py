@@ -20,7 +20,7 @@ from auvnav.vision.evaluate import loops_section
 from auvnav.vision.features import FeatureSettings
 from auvnav.vision.loopfile import read_loops
 from auvnav.vision.loops import LoopSettings, find_loops, read_prior
-from auvnav.vision.stereo import cache_path, pair_features
+from auvnav.vision.stereo import cache_path, pair_features, read_features
 
 FAST = LoopSettings(features=FeatureSettings(max_features=1500))
 
@@ -68,8 +68,26 @@ def test_features_are_cached(tiny_dive, loops_run) -> None:
     again = pair_features(left, right, rig, rectification(rig), settings, cache)
     assert path.stat().st_mtime_ns == stamp  # read back, not recomputed
     assert len(again) > 100
+    fresh = pair_features(left, right, rig, rectification(rig), settings, None)
+    np.testing.assert_array_equal(again.p_cam_m, fresh.p_cam_m)
+    np.testing.assert_array_equal(again.descriptors, fresh.descriptors)
+    np.testing.assert_allclose(again.uv_left_px, fresh.uv_left_px, atol=1e-4)  # single precision
+    np.testing.assert_allclose(again.cov_cam_m2, fresh.cov_cam_m2, rtol=1e-6)
     # other settings are another cache entry
     assert cache_path(cache, left, right, rig, FeatureSettings(scale=0.5)) != path
+
+
+def test_a_corrupt_feature_cache_is_recomputed(tiny_dive, tmp_path: Path, caplog) -> None:
+    dive = read_dive(tiny_dive.path)
+    rig = dive.vehicle.stereo
+    left, right = (tiny_dive.path / "images" / str(n) for n in (dive.images.left[2], dive.images.right[2]))
+    settings = FeatureSettings()
+    path = cache_path(tmp_path, left, right, rig, settings)
+    path.write_bytes(b"\x93NUMPY truncated")
+    with caplog.at_level(logging.WARNING):
+        feats = pair_features(left, right, rig, rectification(rig), settings, tmp_path)
+    assert "unreadable feature cache" in caplog.text and path.name in caplog.text
+    np.testing.assert_array_equal(read_features(path).descriptors, feats.descriptors)
 
 
 def test_missing_and_corrupt_images_are_skipped_with_a_warning(tiny_dive, tmp_path: Path, caplog) -> None:

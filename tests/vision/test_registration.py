@@ -18,7 +18,8 @@ from auvnav.vision.candidates import (
     reach_distance,
 )
 from auvnav.vision.features import match_descriptors
-from auvnav.vision.registration import Registration, RegistrationSettings, _expm_so3, register
+from auvnav.vision.loops import body_pose_and_covariance
+from auvnav.vision.registration import Registration, RegistrationSettings, expm_so3, register
 from auvnav.vision.stereo import StereoFeatures
 
 
@@ -100,8 +101,28 @@ def test_registration_rejects_unrelated_sets_with_a_reason() -> None:
 def test_expm_so3_is_rodrigues() -> None:
     import cv2
 
-    w = np.array([0.3, -0.2, 0.5])
-    np.testing.assert_allclose(_expm_so3(w), cv2.Rodrigues(w)[0], atol=1e-12)
+    w = np.array([[0.3, -0.2, 0.5], [1e-3, 0.0, -2e-3], [0.0, 0.0, 0.0]])
+    R = expm_so3(w)
+    assert R.shape == (3, 3, 3)
+    for k in range(3):
+        np.testing.assert_allclose(R[k], cv2.Rodrigues(w[k])[0], atol=1e-12)
+
+
+def test_body_covariance_is_the_camera_covariance_turned_into_the_body() -> None:
+    """At the identity, a camera perturbation (dt, dtheta) is the body's turned by the mount, the
+    rotation also moving the body through the lever arm: ``dt_b = R dt + [t]x R dtheta``."""
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(6, 6))
+    cov = 1e-6 * A @ A.T
+    R_bc = expm_so3(np.array([0.2, -0.1, 1.3]))
+    T_bc = se3(R_bc, np.array([0.5, 0.1, 0.2]))
+    p, c = body_pose_and_covariance(np.eye(4), cov, T_bc)
+    np.testing.assert_allclose(p, 0.0, atol=1e-12)
+    M = np.zeros((6, 6))
+    M[:3, :3] = M[3:, 3:] = R_bc
+    t = T_bc[:3, 3]
+    M[:3, 3:] = np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]]) @ R_bc
+    np.testing.assert_allclose(c, M @ cov @ M.T, rtol=1e-5, atol=1e-14)
 
 
 def test_disc_overlap_reference_values() -> None:

@@ -57,8 +57,8 @@ from auvnav.vision.candidates import (
 )
 from auvnav.vision.features import FeatureSettings, Vocabulary, build_vocabulary
 from auvnav.vision.loopfile import LoopClosures, loops_from_transforms, write_loops
-from auvnav.vision.registration import RegistrationSettings, _expm_so3, register
-from auvnav.vision.stereo import StereoFeatures, cache_path, pair_features
+from auvnav.vision.registration import RegistrationSettings, expm_so3, register
+from auvnav.vision.stereo import StereoFeatures, cache_path, pair_features, read_features
 
 log = logging.getLogger(__name__)
 
@@ -135,9 +135,9 @@ class LoopResult:
 
 
 def pose6(T: FloatArray) -> FloatArray:
-    """``(x, y, z, roll, pitch, yaw)`` of a 4x4 transform (Euler ZYX)."""
-    yaw, pitch, roll = rot2euler(T[:3, :3])
-    return np.array([*T[:3, 3], float(roll), float(pitch), float(yaw)])
+    """``(x, y, z, roll, pitch, yaw)`` of 4x4 transforms (..., 4, 4) -> (..., 6) (Euler ZYX)."""
+    yaw, pitch, roll = rot2euler(T[..., :3, :3])
+    return np.concatenate([T[..., :3, 3], np.stack([roll, pitch, yaw], axis=-1)], axis=-1)
 
 
 def body_pose_and_covariance(
@@ -149,24 +149,16 @@ def body_pose_and_covariance(
     :class:`~auvnav.vision.registration.Registration`; it is propagated with a central-difference
     Jacobian.
     """
-    T_cb = se3_inverse(T_bc)
-
-    def f(xi: FloatArray) -> FloatArray:
-        T = T_cc.copy()
-        T[:3, :3] = _expm_so3(xi[3:]) @ T_cc[:3, :3]
-        T[:3, 3] = T_cc[:3, 3] + xi[:3]
-        return pose6(T_bc @ T @ T_cb)
-
-    x0 = f(np.zeros(6))
-    J = np.zeros((6, 6))
     h = 1e-6
-    for k in range(6):
-        e = np.zeros(6)
-        e[k] = h
-        d = f(e) - f(-e)
-        d[3:] = wrap_angle(d[3:])
-        J[:, k] = d / (2 * h)
-    return x0, J @ cov_xi @ J.T
+    xi = np.concatenate([np.zeros((1, 6)), h * np.eye(6), -h * np.eye(6)])  # 0, +h e_k, -h e_k
+    T = np.broadcast_to(T_cc, (13, 4, 4)).copy()
+    T[:, :3, :3] = expm_so3(xi[:, 3:]) @ T_cc[:3, :3]
+    T[:, :3, 3] += xi[:, :3]
+    p = pose6(T_bc @ T @ se3_inverse(T_bc))
+    d = p[1:7] - p[7:]
+    d[:, 3:] = wrap_angle(d[:, 3:])
+    J = d.T / (2 * h)
+    return p[0], J @ cov_xi @ J.T
 
 
 # ---------------------------------------------------------------------------------------------
@@ -201,8 +193,7 @@ def _features_task(ctx: _Context, items: list[tuple[int, str, str]]) -> list[tup
 
 @lru_cache(maxsize=512)
 def _load(path: str) -> StereoFeatures:
-    with np.load(path) as z:
-        return StereoFeatures(z["uv"], z["p"], z["cov"], z["desc"])
+    return read_features(path)
 
 
 def _verify_task(

@@ -1,0 +1,34 @@
+"""SIFT front end: keypoints where their features are."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from auvnav.frames import euler2rot, se3
+from auvnav.sim.camera import default_stereo_rig, render_stereo_pair, scale_camera_rig
+from auvnav.sim.texture import SeafloorTexture
+from auvnav.vision.features import FeatureSettings, correct_illumination, detect
+
+# A location bias b shows as 2 b between the keypoints of an image and of the image turned by 180 degrees
+# (0.5 px with OpenCV's fast upscale uncorrected); the turn is exact, so a tolerance well below that.
+BIAS_TOL_PX = 0.03
+
+
+@pytest.mark.parametrize("scale", [None, 0.5])
+def test_keypoints_have_no_location_bias(flat_floor, scale: float | None) -> None:
+    """An unbiased detector finds the keypoints of an image turned by 180 degrees at the turned positions."""
+    rig = scale_camera_rig(default_stereo_rig(), 0.5)
+    T = se3(euler2rot(0.3, 0.0, 0.0), np.array([0.0, 0.0, flat_floor.base_m - 2.0]))
+    image = correct_illumination(render_stereo_pair(flat_floor, SeafloorTexture(seed=2), rig, T)[0])
+    settings = FeatureSettings(scale=scale)
+    h, w = image.shape
+    uv = detect(image, settings).uv_px
+    turned = detect(np.ascontiguousarray(image[::-1, ::-1]), settings).uv_px
+    back = np.column_stack([w - 1 - turned[:, 0], h - 1 - turned[:, 1]])
+    dist, k = cKDTree(uv).query(back)
+    same = dist < 0.5
+    assert same.sum() > 0.5 * len(uv)
+    bias = np.median(back[same] - uv[k[same]], axis=0)
+    np.testing.assert_allclose(bias, 0.0, atol=BIAS_TOL_PX)
