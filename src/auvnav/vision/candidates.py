@@ -33,7 +33,7 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
-from scipy.stats import ncx2
+from scipy.stats import ncx2, norm
 
 from auvnav.trajectory import Trajectory
 from auvnav.vehicle import StereoRig
@@ -212,18 +212,21 @@ class DriftModel:
         H = self._H0.copy()
         b = np.zeros((2 * K, 2))
         if len(t_i):
+            # Each loop's row of the design matrix has four entries (the knots around t_i and t_j):
+            # its outer product adds 16 entries to H, summed with bincount.
             ki, ai = self._weights(t_i)
             kj, aj = self._weights(t_j)
-            n = len(t_i)
-            A = np.zeros((n, 2 * K))
-            r = np.arange(n)
-            np.add.at(A, (r, kj), 1 - aj)
-            np.add.at(A, (r, kj + 1), aj)
-            np.add.at(A, (r, ki), -(1 - ai))
-            np.add.at(A, (r, ki + 1), -ai)
+            idx = np.stack([kj, kj + 1, ki, ki + 1], axis=1)
+            a = np.stack([1 - aj, aj, -(1 - ai), -ai], axis=1)
             w = 1.0 / np.asarray(sigma_m, dtype=float) ** 2
-            H += A.T @ (A * w[:, None])
-            b += A.T @ (np.asarray(z_ne_m) * w[:, None])
+            wa = a * w[:, None]
+            flat = (idx[:, :, None] * (2 * K) + idx[:, None, :]).ravel()
+            H += np.bincount(flat, (wa[:, :, None] * a[:, None, :]).ravel(), (2 * K) ** 2).reshape(
+                2 * K, 2 * K
+            )
+            z = np.asarray(z_ne_m, dtype=float)
+            for axis in range(2):
+                b[:, axis] += np.bincount(idx.ravel(), (wa * z[:, axis : axis + 1]).ravel(), 2 * K)
         P = np.linalg.inv(H)
         self.correction_ne_m = (P @ b)[:K]
         self._P_cc = P[:K, :K]
@@ -293,7 +296,12 @@ def candidate_pairs(
     sigma = drift.relative_sigma(fp.t_s[i], fp.t_s[j])
     mu = np.linalg.norm(centre[j] - centre[i], axis=1)
     d_max = rho * 0.5 * (fp.radius_m[i] + fp.radius_m[j])
-    p = overlap_probability(mu, sigma, d_max)
+    # A point of the disc |x| <= d_max lies at most d_max along mu's direction, so the probability is
+    # at most Phi((d_max - mu) / sigma): pairs for which that bound is below p_min are dropped before
+    # the (slow) exact probability is computed for the rest.
+    keep = (d_max - mu) / np.maximum(sigma, 1e-9) >= norm.ppf(settings.p_min)
+    i, j = i[keep], j[keep]
+    p = overlap_probability(mu[keep], sigma[keep], d_max[keep])
     keep = p >= settings.p_min
     order = np.argsort(-p[keep], kind="stable")
     return i[keep][order], j[keep][order], p[keep][order]
