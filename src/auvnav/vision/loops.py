@@ -58,7 +58,7 @@ from auvnav.vision.candidates import (
 from auvnav.vision.features import FeatureSettings, Vocabulary, build_vocabulary
 from auvnav.vision.loopfile import LoopClosures, loops_from_transforms, write_loops
 from auvnav.vision.registration import RegistrationSettings, expm_so3, register
-from auvnav.vision.stereo import StereoFeatures, cache_path, pair_features, read_features
+from auvnav.vision.stereo import cache_path, pair_features, read_features
 
 log = logging.getLogger(__name__)
 
@@ -191,9 +191,7 @@ def _features_task(ctx: _Context, items: list[tuple[int, str, str]]) -> list[tup
     return out
 
 
-@lru_cache(maxsize=512)
-def _load(path: str) -> StereoFeatures:
-    return read_features(path)
+_load = lru_cache(maxsize=512)(read_features)  # each worker's recently used feature files
 
 
 def _verify_task(
