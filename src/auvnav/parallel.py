@@ -6,20 +6,38 @@ while one of those threads holds a lock waits on it for ever (observed: ``cv2.se
 forked worker after ``cv2.stereoRectify`` in the parent). Each worker runs OpenCV on one thread, since
 the pool already uses every core, and logs its warnings in its caller's format, since it does not
 inherit the caller's logging set-up (information from workers, such as libraries announcing their
-thread counts, is left out).
+thread counts, is left out). A worker also exits when its caller has gone: a caller killed by a
+signal it cannot catch (SIGTERM, SIGKILL) leaves its workers behind otherwise, each holding its memory
+(and its share of the pool's pipes, so that the server process lives on too) for ever.
 """
 
 from __future__ import annotations
 
 import logging
 import multiprocessing
+import os
 import sys
+import threading
+import time
 from concurrent.futures import ProcessPoolExecutor
 
 import cv2
 
+CALLER_POLL_S = 1.0  # how often a worker checks that its caller is alive
 
-def _worker_init(level: int, formatter: logging.Formatter | None) -> None:
+
+def _exit_with(caller_pid: int) -> None:
+    """Exit this process as soon as ``caller_pid`` no longer exists."""
+    while True:
+        time.sleep(CALLER_POLL_S)
+        try:
+            os.kill(caller_pid, 0)
+        except ProcessLookupError:
+            os._exit(1)
+
+
+def _worker_init(level: int, formatter: logging.Formatter | None, caller_pid: int) -> None:
+    threading.Thread(target=_exit_with, args=(caller_pid,), daemon=True).start()
     cv2.setNumThreads(1)
     handler = logging.StreamHandler(sys.stderr)
     if formatter is not None:
@@ -37,5 +55,5 @@ def process_pool(workers: int | None = None) -> ProcessPoolExecutor:
         max_workers=workers,
         mp_context=multiprocessing.get_context("forkserver"),
         initializer=_worker_init,
-        initargs=(root.getEffectiveLevel(), formatter),
+        initargs=(root.getEffectiveLevel(), formatter, os.getpid()),
     )
