@@ -118,6 +118,7 @@ def test_calibration_that_does_not_match_the_images_is_one_line(tiny_dive, tmp_p
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1
     assert "image is 340x256 but the stereo calibration" in err[0]
+    assert not (copy / "products" / "vision").exists()  # nothing left behind
 
 
 def test_without_navigation_the_command_says_what_to_run(tiny_dive, tmp_path: Path, capsys) -> None:

@@ -359,7 +359,6 @@ def find_loops(
             "images/index.csv: fewer than two images inside the navigation's time span"
         )
     cache_dir = Path(cache_dir) if cache_dir is not None else dive.path / "products" / "vision" / "features"
-    cache_dir.mkdir(parents=True, exist_ok=True)
     ctx = _Context(dive.path / "images", rig, rectification(rig), settings, cache_dir)
     started = time.perf_counter()
     pool = None if workers == 1 else process_pool(workers)
