@@ -66,7 +66,7 @@ pulls quadratically while dead reckoning is metres off, and shrinks stage by sta
 starting from the last one's solution. (GTSAM's ``GncLMOptimizer`` classifies as well but runs a
 full solve per step of its schedule, dozens of them: minutes for a navigation check dive.) Each stage's
 linear systems are solved by Cholesky, and a last Levenberg-Marquardt run by QR finishes the solve
-(:func:`_lm`).
+(:func:`_lm_cholesky_then_qr`).
 
 Incremental (what a vehicle would run): iSAM2, ``poses_per_update`` poses per update
 (:data:`DEFAULT_POSES_PER_UPDATE`; 1 is pose by pose), each with every factor that joins it to the
@@ -74,9 +74,9 @@ poses before it, the chosen kernel throughout (each new loop closure meets an es
 earlier ones already corrected).
 
 Marginal covariances of the poses come from the Bayes tree of the solved graph, linearised and
-eliminated by QR (robust factors at their final weights, the rejected loop closures left out); ``marginal_every`` > 1 computes every
-that-many-th image pose (and the first and last poses) and interpolates the sigmas in time between
-them. Every pose of a navigation check dive takes seconds.
+eliminated by QR (robust factors at their final weights, the rejected loop closures left out);
+``marginal_every`` > 1 computes every that-many-th image pose (and the first and last poses) and
+interpolates the sigmas in time between them. Every pose of a navigation check dive takes seconds.
 """
 
 from __future__ import annotations
