@@ -45,9 +45,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from auvnav.compass import decimal_year2posix, earth_field
 from auvnav.compass.calibrate import calibrate_dive
 from auvnav.compass.evaluate import compass_section
+from auvnav.compass.field import decimal_year2posix, earth_field
 from auvnav.report.compass_figures import run_compass_fit
 from auvnav.sim.run import run_scenario
 

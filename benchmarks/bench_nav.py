@@ -22,9 +22,9 @@ import time
 import tracemalloc
 
 import numpy as np
+from auvnav.nav.products import navigate
 
 from auvnav.dive import Dive
-from auvnav.nav.products import navigate
 from auvnav.nav.synthetic import Motion, Noise, lawnmower_legs, legs_motion, synthetic_dive
 
 RATE_HZ = 10.0

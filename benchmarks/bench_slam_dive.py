@@ -42,11 +42,12 @@ from typing import Any
 import yaml
 
 from auvnav.compass.evaluate import compass_section
+from auvnav.compass.stage import CompassSettings, fit_to_file
 from auvnav.evaluate import evaluate_dive
-from auvnav.report.compass_figures import run_compass_fit
+from auvnav.pipeline import run_stage
 from auvnav.sim.run import run_scenario
 from auvnav.sim.truthloops import write_truth_loops
-from auvnav.slam.products import run_slam
+from auvnav.slam.stage import SlamSettings
 
 TARGETS = {
     "navcheck_ate_aligned_m": 0.10,
@@ -61,7 +62,7 @@ def _slam_task(dive: str, options: dict[str, Any]) -> dict[str, Any]:
     """One SLAM run (in a child process): its summary, scores, wall time and peak memory."""
     logging.basicConfig(level=logging.WARNING)
     start = time.perf_counter()
-    summary = run_slam(Path(dive), **options)
+    summary = run_stage(Path(dive), "slam", SlamSettings(**options))
     wall = time.perf_counter() - start
     scores = evaluate_dive(Path(dive))["slam"]
     return {
@@ -130,11 +131,11 @@ def main() -> None:
     nav = args.out / "navcheck"
     simulate("navcheck", nav, args.seed)
     clean = slam_run(nav, loops=nav / "truth" / "loops.csv", **tide(nav))
-    fit = run_compass_fit([nav], reference="slam", out=args.out / "navcheck_fit.yaml", overwrite=True)
-    fit_scores = compass_section(nav, Path(fit["correction"]))
+    fit_to_file([nav], CompassSettings(reference="slam"), args.out / "navcheck_fit.yaml", overwrite=True)
+    fit_scores = compass_section(nav, args.out / "navcheck_fit.yaml")
     false = slam_run(nav, loops=nav / "truth" / "loops_false20.csv", **tide(nav))
     estimated = slam_run(nav, loops=nav / "truth" / "loops.csv", estimate_compass=True, **tide(nav))
-    est_scores = compass_section(nav, nav / "products" / "slam" / "compass_correction.yaml")
+    est_scores = compass_section(nav, nav / "products" / "slam" / "correction.yaml")
     print(row("navcheck, clean", clean))
     print(f"{'':42s} deviation fitted to SLAM headings: shape RMS {fit_scores['shape_rmse_deg']:.4f} deg")
     ratio = false["scores"]["ate_aligned_rmse_m"] / clean["scores"]["ate_aligned_rmse_m"]
@@ -159,7 +160,7 @@ def main() -> None:
     # survey as flown: its lines barely overlap, so the compass's deviation is estimated in the graph).
     if not args.skip_survey:
         for name, flown, solved in (
-            ("survey_corrected", {"compass_correction": Path(fit["correction"])}, {}),
+            ("survey_corrected", {"compass_correction": args.out / "navcheck_fit.yaml"}, {}),
             ("survey_raw", {}, {}),
             ("survey_raw", {}, {"estimate_compass": True}),
         ):

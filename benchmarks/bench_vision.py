@@ -47,6 +47,7 @@ def run(args: list[str]) -> None:
 
 def render(dive: Path, scale: float, seconds: float | None) -> dict[str, float]:
     """Simulate and render a dive (when absent); the rendering speed."""
+    from auvnav.executor import make_executor
     from auvnav.sim.camera import render_dive_images
 
     if not (dive / "truth").is_dir():
@@ -56,7 +57,8 @@ def render(dive: Path, scale: float, seconds: float | None) -> dict[str, float]:
     if index.is_file():
         return {}
     started = time.perf_counter()
-    images = render_dive_images(dive, scale=scale)
+    with make_executor() as executor:
+        images = render_dive_images(dive, scale=scale, executor=executor)
     elapsed = time.perf_counter() - started
     return {"rendered_pairs": len(images), "render_s": elapsed, "render_pairs_per_s": len(images) / elapsed}
 
@@ -68,13 +70,14 @@ def loops(dive: Path, usage: TreeUsage, *, fresh: bool) -> dict[str, float]:
     cores, for each phase (1: every core busy throughout).
     """
     from auvnav.evaluate import read_truth
+    from auvnav.pipeline import run_stage
     from auvnav.vision.evaluate import loops_section
-    from auvnav.vision.loops import run_loop_stage
 
     if not (dive / "products" / "nav" / "filter.csv").is_file():
         run([*AUVNAV, "navigate", dive, "--json"])
     if fresh:
         shutil.rmtree(dive / "products" / "vision", ignore_errors=True)
+        shutil.rmtree(dive / "products" / "cache" / "vision", ignore_errors=True)
     last = [0.0]
     marks: dict[str, tuple[float, float]] = {}
 
@@ -89,7 +92,7 @@ def loops(dive: Path, usage: TreeUsage, *, fresh: bool) -> dict[str, float]:
             last[0] = now
 
     start = (time.perf_counter(), usage.cpu_s())
-    summary = run_loop_stage(dive, progress=progress)
+    summary = run_stage(dive, "vision", progress=progress)
     end = marks["end"]
     cores = os.cpu_count() or 1
     busy = {

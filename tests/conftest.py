@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -65,3 +66,21 @@ def small_dive():
         )
 
     return make
+
+
+@dataclass(frozen=True)
+class FlatFloor:
+    """A horizontal seafloor at ``base_m`` metres (the simulator's seafloor interface)."""
+
+    base_m: float = 20.0
+
+    def depth_m(self, north_m, east_m):
+        import numpy as np
+
+        return np.full(np.broadcast_shapes(np.shape(north_m), np.shape(east_m)), self.base_m)
+
+
+@pytest.fixture(scope="session")
+def level_floor() -> type[FlatFloor]:
+    """The class of a horizontal seafloor: ``level_floor(depth_m)``."""
+    return FlatFloor

@@ -11,7 +11,7 @@ import pytest
 
 from auvnav.cli import main
 
-pytestmark = pytest.mark.slow
+pytestmark = pytest.mark.demo
 
 
 @pytest.fixture(scope="module")

@@ -77,12 +77,18 @@ def _simulate(
     return run_scenario(scenario, out / name, seed=seed, geometry=geometry, overwrite=True, **options)
 
 
-def _navigate_and_score(dive: Path, correction: Path | None = None) -> dict[str, Any]:
-    from auvnav.evaluate import evaluate_dive
-    from auvnav.nav.products import run_navigation
+def _process(
+    dive: Path, say: Progress, tick: Callable[[str, int, int], None], **settings: Any
+) -> dict[str, Any]:
+    """``auvnav process`` on a dive of the campaign; each stage's summary by name (raises on a failure)."""
+    from auvnav.errors import AuvnavError
+    from auvnav.pipeline import process
 
-    nav = run_navigation(dive, compass_correction=correction)
-    return {"navigation": nav, "evaluation": evaluate_dive(dive, compass_correction=correction)}
+    result = process(dive, settings=settings, say=lambda line: say(f"  {line}"), progress=tick)
+    if result.failed:
+        first = result.failed[0]
+        raise AuvnavError(f"{dive}: stage {first.stage} failed: {first.reason}")
+    return {o.stage: o.summary for o in result.outcomes if o.summary is not None}
 
 
 #: Where the compass fit takes its reference headings: SLAM, as in the paper.
@@ -92,7 +98,7 @@ COMPASS_REFERENCE = "slam"
 def run_demo(
     out: Path, *, quick: bool = False, overwrite: bool = False, progress: Progress | None = None
 ) -> dict[str, Any]:
-    """Simulate the campaign into ``out`` and run every stage that exists; return the measurements.
+    """Simulate the campaign into ``out``, process every dive, fit the compass; return the measurements.
 
     Parameters
     ----------
@@ -104,11 +110,22 @@ def run_demo(
     progress : callable, optional
         Called with a line of text as each step starts.
     """
+    from auvnav.compass.evaluate import TRUE_DEVIATION_FILE, read_true_deviation
+    from auvnav.compass.stage import CompassSettings, fit_to_file
+    from auvnav.depth.stage import DepthSettings
+    from auvnav.evaluate import evaluate_dive
+    from auvnav.executor import make_executor
+    from auvnav.nav.stage import NavSettings
+    from auvnav.report.compass_figures import CorrectionFigure, plot_correction
+    from auvnav.sim.camera import render_dive_images
+    from auvnav.slam.stage import SlamSettings
+
     out = Path(out)
     if out.exists() and any(out.iterdir()) and not overwrite:
         raise OutputExistsError(f"{out}: exists (use --overwrite to replace it)")
     out.mkdir(parents=True, exist_ok=True)
     say = progress or (lambda text: log.info(text))
+    tick = _throttled(say)
     campaign = QUICK if quick else FULL
     dives: dict[str, dict[str, Any]] = {}
 
@@ -120,47 +137,40 @@ def run_demo(
     ]
     for name, scenario, geometry, seed, options in plan:
         say(f"simulating {name}")
-        sim = _simulate(out, name, scenario, geometry, seed, **options)
-        say(f"navigating {name}")
-        dives[name] = {"simulation": sim, **_navigate_and_score(out / name)}
-
-    from auvnav.evaluate import evaluate_dive
-    from auvnav.nav.products import run_navigation
-    from auvnav.report.compass_figures import run_compass_fit
-    from auvnav.report.depth_figures import depth_products
-    from auvnav.sim.camera import render_dive_images
-    from auvnav.slam.products import run_slam
-    from auvnav.vision.loops import run_loop_stage
+        dives[name] = {"simulation": _simulate(out, name, scenario, geometry, seed, **options)}
 
     navcheck = out / "navcheck"
-    tick = _throttled(say)
     say(f"rendering navcheck's stereo images ({campaign.image_scale:g} scale)")
-    render_dive_images(
-        navcheck,
-        scale=campaign.image_scale,
-        seed=campaign.seeds["navcheck"],
-        progress=lambda done, total: tick("stereo pairs", done, total),
+    with make_executor() as executor:
+        render_dive_images(
+            navcheck,
+            scale=campaign.image_scale,
+            seed=campaign.seeds["navcheck"],
+            executor=executor,
+            progress=lambda done, total: tick("stereo pairs", done, total),
+        )
+    say("processing navcheck (navigation, visual loop closures, SLAM, compass, depth against the tide)")
+    navcheck_stages = _process(
+        navcheck, say, tick, depth=DepthSettings(tide=navcheck / "truth" / "tide.csv", estimate_tide=True)
     )
-    say("finding visual loop closures on navcheck (SIFT, stereo, candidates, registration)")
-    vision = run_loop_stage(navcheck, progress=tick)
-    loops = navcheck / "products" / "vision" / "loops.csv"
-    say("SLAM on navcheck (DVL, compass, depth, GPS and visual loop closures in one GTSAM graph)")
-    slam = run_slam(navcheck, loops=loops)
-    say("checking pressure depth against the loop closures' vertical (tide given, and estimated)")
-    depth = depth_products(
-        navcheck, tide_path=navcheck / "truth" / "tide.csv", loops_path=loops, estimate=True, overwrite=True
-    )
-    dives["navcheck"]["evaluation"] = evaluate_dive(navcheck)
+    dives["navcheck"].update(navigation=navcheck_stages["nav"], evaluation=evaluate_dive(navcheck))
+    for name, *_ in plan[1:]:
+        say(f"processing {name} (navigation)")
+        stages = _process(out / name, say, tick)
+        dives[name].update(navigation=stages["nav"], evaluation=evaluate_dive(out / name))
 
     correction = out / "compass-correction.yaml"
     say(f"fitting the compass correction on navcheck ({COMPASS_REFERENCE} headings), constant from transit")
-    compass = run_compass_fit(
-        [out / "navcheck"],
-        reference=COMPASS_REFERENCE,
-        transits=[out / "transit"],
-        out=correction,
+    fit = fit_to_file(
+        [navcheck],
+        CompassSettings(reference=COMPASS_REFERENCE, transits=(out / "transit",)),
+        correction,
         overwrite=True,
     )
+    truth = read_true_deviation(navcheck) if (navcheck / TRUE_DEVIATION_FILE).is_file() else None
+    plot_correction(CorrectionFigure.from_fit(fit), correction.with_suffix(".png"), true_deviation=truth)
+    compass = {"correction": str(correction), "figure": str(correction.with_suffix(".png")), **fit.summary()}
+
     say("simulating survey-corrected (the vehicle flies with the correction)")
     survey = out / "survey-corrected"
     sim = _simulate(
@@ -172,18 +182,19 @@ def run_demo(
         compass_correction=correction,
         truth_loops=True,
     )
-    say("navigating survey-corrected")
-    nav = run_navigation(survey, compass_correction=correction)
-    say("checking pressure depth against the survey's loop closures")
-    depth_survey = depth_products(
+    say("processing survey-corrected (navigation with the correction; SLAM and depth check on its loops)")
+    loops, tide = survey / "truth" / "loops.csv", survey / "truth" / "tide.csv"
+    stages = _process(
         survey,
-        tide_path=survey / "truth" / "tide.csv",
-        loops_path=survey / "truth" / "loops.csv",
-        overwrite=True,
+        say,
+        tick,
+        nav=NavSettings(compass_correction=correction),
+        slam=SlamSettings(loops=loops, compass_correction=correction),
+        depth=DepthSettings(loops=loops, tide=tide),
     )
     dives[survey.name] = {
         "simulation": sim,
-        "navigation": nav,
+        "navigation": stages["nav"],
         "evaluation": evaluate_dive(survey, compass_correction=correction),
     }
     compass["evaluation"] = dives["survey-corrected"]["evaluation"].get("compass")
@@ -194,9 +205,9 @@ def run_demo(
         "dives": dives,
         "compass": compass,
         "compass_reference": COMPASS_REFERENCE,
-        "vision": vision,
-        "slam": slam,
-        "depth": {"navcheck": depth, "survey-corrected": depth_survey},
+        "vision": navcheck_stages["vision"],
+        "slam": navcheck_stages["slam"],
+        "depth": {"navcheck": navcheck_stages["depth"], "survey-corrected": stages["depth"]},
         "headline": _headline(dives),
         "not_yet_built": list(NOT_YET),
     }

@@ -19,11 +19,11 @@ from pathlib import Path
 from typing import Any, ClassVar, Literal
 
 import numpy as np
-import yaml
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, ValidationError, field_validator
 from pydantic import Field as PydanticField
 
+from auvnav.config import dump_yaml, load_yaml, pydantic_problems
 from auvnav.errors import DiveFormatError, OutputExistsError, Problem
 from auvnav.frames import GeodeticOrigin
 from auvnav.streams import Field, Stream, looks_like_radians, read_table, within, write_stream
@@ -261,32 +261,6 @@ class DiveInfo:
         }
 
 
-def load_yaml(path: Path, display: str) -> tuple[Any, list[Problem]]:
-    """Parse a YAML file; a syntax error is a problem naming its line."""
-    try:
-        return yaml.safe_load(path.read_text(encoding="utf-8")), []
-    except FileNotFoundError:
-        return None, [Problem(display, "file not found")]
-    except UnicodeDecodeError:
-        return None, [Problem(display, "not a YAML text file (not UTF-8)")]
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark is not None else ""
-        return None, [Problem(display, f"not valid YAML{where}: {getattr(err, 'problem', err)}")]
-
-
-def pydantic_problems(err: ValidationError, display: str) -> list[Problem]:
-    """One problem per pydantic error, naming the key path."""
-    out = []
-    for e in err.errors():
-        key = ".".join(str(p) for p in e["loc"]) or "(top level)"
-        msg = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
-        if e["type"] not in ("extra_forbidden", "missing") and "input" in e:
-            msg += f" (found {e['input']!r})"
-        out.append(Problem(display, f"key {key}: {msg}"))
-    return out
-
-
 def _parse_dive_yaml(path: Path) -> tuple[DiveInfo | None, list[Problem]]:
     data, problems = load_yaml(path, "dive.yaml")
     if problems:
@@ -308,6 +282,14 @@ def _parse_dive_yaml(path: Path) -> tuple[DiveInfo | None, list[Problem]]:
         vehicle_file=f.vehicle,
     )
     return info, []
+
+
+def read_dive_info(path: Path) -> DiveInfo:
+    """What a dive folder's dive.yaml says, without reading its streams (:class:`DiveFormatError`)."""
+    info, problems = _parse_dive_yaml(Path(path) / "dive.yaml")
+    if info is None:
+        raise DiveFormatError([Problem(f"{path}/{p.file}", p.message, p.row, p.column) for p in problems])
+    return info
 
 
 # ---------------------------------------------------------------------------------------------
@@ -348,6 +330,60 @@ def find_stream_file(root: Path, stem: str) -> Path | None:
         if candidate.is_file():
             return candidate
     return None
+
+
+def vehicle_file_name(path: Path) -> str | None:
+    """The vehicle file that a dive folder's dive.yaml names (``vehicle.yaml`` when it names none),
+    or None when dive.yaml cannot say (reading the dive reports why)."""
+    data, problems = load_yaml(Path(path) / "dive.yaml", "dive.yaml")
+    if problems or not isinstance(data, dict):
+        return None
+    name = data.get("vehicle", "vehicle.yaml")
+    return name if isinstance(name, str) else None
+
+
+def dive_files(path: Path) -> dict[str, Path]:
+    """The files of a dive folder that its navigation depends on, by their path inside it.
+
+    ``dive.yaml``, the vehicle file it names (and the stereo calibration files that names), and
+    every stream file under ``nav/``. The image files are not included (see :func:`image_files`).
+    Unreadable YAML leaves out what it would have named: reading the dive reports the problem.
+    """
+    path = Path(path)
+    out: dict[str, Path] = {}
+
+    def add(rel: str) -> None:
+        if (path / rel).is_file():
+            out[rel] = path / rel
+
+    add("dive.yaml")
+    vehicle = vehicle_file_name(path)
+    if vehicle is not None:
+        add(vehicle)
+        data, _ = load_yaml(path / vehicle, vehicle)
+        stereo = data.get("stereo") if isinstance(data, dict) else None
+        files = stereo.get("calibration_file") if isinstance(stereo, dict) else None
+        base = Path(vehicle).parent
+        for name in [files] if isinstance(files, str) else files if isinstance(files, list) else []:
+            if isinstance(name, str):
+                add(str(base / name))
+    for cls in (*REQUIRED_STREAMS.values(), *OPTIONAL_STREAMS.values()):
+        if cls is not ImageIndex:
+            found = find_stream_file(path, cls.FILE)
+            if found is not None:
+                out[str(found.relative_to(path))] = found
+    return out
+
+
+def image_files(path: Path, index: ImageIndex) -> dict[str, Path]:
+    """The image files an index names that exist, by their path inside the dive folder."""
+    root = Path(path) / "images"
+    out = {}
+    for name in (*index.left, *index.right):
+        file = root / str(name)
+        if file.is_file():
+            out[f"images/{name}"] = file
+    return out
 
 
 @dataclass(frozen=True)
@@ -478,7 +514,7 @@ def write_dive(
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.tmp"))
     try:
-        (tmp / "dive.yaml").write_text(yaml.safe_dump(dive.info.to_yaml(), sort_keys=False), encoding="utf-8")
+        (tmp / "dive.yaml").write_text(dump_yaml(dive.info.to_yaml()), encoding="utf-8")
         write_vehicle(dive.vehicle, tmp / dive.info.vehicle_file)
         for stream in dive.streams().values():
             write_stream(stream, tmp / f"{stream.FILE}.{fmt}")

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from auvnav import products as P
 from auvnav.compass.evaluate import compass_section
 from auvnav.errors import DiveFormatError, Problem
 from auvnav.frames import FloatArray, angle_diff, rot_z
@@ -139,11 +140,11 @@ def score_trajectory(
 Section = Callable[[Path, Trajectory, float], "dict[str, Any] | None"]
 
 
-def trajectory_section(product: str) -> Section:
-    """A section scoring the trajectory product ``product`` (relative to ``DIVE/products``)."""
+def trajectory_section(product: P.Product) -> Section:
+    """A section scoring a trajectory product."""
 
     def section(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, Any] | None:
-        path = dive_path / "products" / product
+        path = product.path(dive_path)
         if not path.is_file():
             return None
         return score_trajectory(truth, read_trajectory(path), distance_m, str(path)).as_dict()
@@ -153,16 +154,16 @@ def trajectory_section(product: str) -> Section:
 
 def _compass(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, Any] | None:
     """The dive's own compass correction against its true deviation (:mod:`auvnav.compass.evaluate`)."""
-    path = dive_path / "products" / "compass" / "correction.yaml"
+    path = P.COMPASS_CORRECTION.path(dive_path)
     return compass_section(dive_path, path) if path.is_file() else None
 
 
 def _slam(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, Any] | None:
     """The SLAM trajectory's scores; with a deviation estimated in the graph, also that curve's
     (``deviation_rmse_deg`` as the compass section's, ``deviation_shape_rmse_deg`` without the constant)."""
-    scores = trajectory_section("slam/trajectory.csv")(dive_path, truth, distance_m)
-    estimated = dive_path / "products" / "slam" / "compass_correction.yaml"
-    if scores is not None and estimated.is_file():
+    scores = trajectory_section(P.SLAM_TRAJECTORY)(dive_path, truth, distance_m)
+    estimated = P.existing(dive_path, P.SLAM_CORRECTION)
+    if scores is not None and estimated is not None:
         compass = compass_section(dive_path, estimated)
         scores["deviation_rmse_deg"] = compass["deviation_rmse_deg"]
         scores["deviation_shape_rmse_deg"] = compass["shape_rmse_deg"]
@@ -177,16 +178,16 @@ def _loops(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, A
 
 
 def _depth(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, Any] | None:
-    """Loop-closure depth residuals before and after the tide (:mod:`auvnav.depth.validation`)."""
-    from auvnav.depth.validation import depth_section
+    """Loop-closure depth residuals before and after the tide (:mod:`auvnav.depth.evaluate`)."""
+    from auvnav.depth.evaluate import depth_section
 
     return depth_section(dive_path)
 
 
 #: Sections in output order (DESIGN section 7): name -> scorer (None when its products are absent).
 SECTIONS: dict[str, Section] = {
-    "dr": trajectory_section("nav/dr.csv"),
-    "filter": trajectory_section("nav/filter.csv"),
+    "dr": trajectory_section(P.NAV_DR),
+    "filter": trajectory_section(P.NAV_FILTER),
     "slam": _slam,
     "loops": _loops,
     "compass": _compass,

@@ -203,8 +203,8 @@ def _read_raw(path: Path, display: str) -> tuple[pd.DataFrame | None, list[Probl
     return frame, []
 
 
-def _flag(
-    mask: NDArray[np.bool_], display: str, column: str, describe: Callable[[int], str], more: str
+def flag_rows(
+    mask: NDArray[np.bool_], display: str, column: str | None, describe: Callable[[int], str], more: str
 ) -> list[Problem]:
     """One problem per flagged row for the first few rows (1-based), then a count of the rest."""
     idx = np.flatnonzero(mask)
@@ -218,12 +218,12 @@ def _parse_column(series: pd.Series, kind: Kind, display: str, column: str) -> t
     """Parse one column; name the rows that are empty, not numbers, NaN, not integers or not booleans."""
     if kind == "str":
         values = series.astype(str).str.strip().to_numpy()
-        return values, _flag(values == "", display, column, lambda r: "empty value", "empty values")
+        return values, flag_rows(values == "", display, column, lambda r: "empty value", "empty values")
     if kind == "bool":
         text = series.astype(str).str.strip().str.lower()
         mapping = {"1": True, "0": False, "true": True, "false": False, "1.0": True, "0.0": False}
         bad = ~text.isin(list(mapping)).to_numpy()
-        problems = _flag(
+        problems = flag_rows(
             bad,
             display,
             column,
@@ -240,19 +240,19 @@ def _parse_column(series: pd.Series, kind: Kind, display: str, column: str) -> t
         is_nan_text = text.str.lower().isin(["nan", "", "na", "null", "none"]).to_numpy()
         bad_number = np.isnan(values) & ~is_nan_text
     non_finite = ~np.isfinite(values) & ~bad_number
-    problems = _flag(
+    problems = flag_rows(
         bad_number,
         display,
         column,
         lambda r: f"not a number ({series.iloc[r - 1]!r})",
         "values that are not numbers",
     )
-    problems += _flag(
+    problems += flag_rows(
         non_finite, display, column, lambda r: "NaN or infinite value", "NaN or infinite values"
     )
     if kind == "int":
         fractional = np.isfinite(values) & (values != np.round(values))
-        problems += _flag(
+        problems += flag_rows(
             fractional, display, column, lambda r: f"not an integer ({values[r - 1]!r})", "non-integers"
         )
     return values, problems
@@ -261,13 +261,13 @@ def _parse_column(series: pd.Series, kind: Kind, display: str, column: str) -> t
 def _check_time(t: NDArray, display: str, column: str) -> list[Problem]:
     earlier = np.concatenate([[False], np.diff(t) < 0])
     repeated = np.concatenate([[False], np.diff(t) == 0])
-    return _flag(
+    return flag_rows(
         earlier,
         display,
         column,
         lambda r: f"timestamp out of order ({t[r - 1]:.6f} after {t[r - 2]:.6f})",
         "timestamps out of order",
-    ) + _flag(
+    ) + flag_rows(
         repeated, display, column, lambda r: f"duplicate timestamp {t[r - 1]:.6f}", "duplicate timestamps"
     )
 

@@ -21,10 +21,10 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-import yaml
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, model_validator
 
+from auvnav.config import dump_yaml, load_yaml, pydantic_problems
 from auvnav.errors import ConfigError, Problem
 from auvnav.frames import euler2rot, is_rotation, rot2euler
 
@@ -326,16 +326,16 @@ def read_ros_stereo(
     """
     infos = []
     for p in (left_path, right_path):
-        if not p.is_file():
-            raise ConfigError(f"{p}: calibration file not found")
+        d, problems = load_yaml(p, str(p))
+        if problems:
+            raise ConfigError(str(problems[0]))
         try:
-            d = yaml.safe_load(p.read_text(encoding="utf-8"))
             K = np.asarray(d["camera_matrix"]["data"], dtype=float).reshape(3, 3)
             D = np.asarray(d["distortion_coefficients"]["data"], dtype=float)
             R = np.asarray(d["rectification_matrix"]["data"], dtype=float).reshape(3, 3)
             P = np.asarray(d["projection_matrix"]["data"], dtype=float).reshape(3, 4)
             cam = CameraModel(int(d["image_width"]), int(d["image_height"]), K, D)
-        except (yaml.YAMLError, KeyError, TypeError, ValueError) as err:
+        except (KeyError, TypeError, ValueError) as err:
             raise ConfigError(f"{p}: not a ROS camera_info YAML ({type(err).__name__}: {err})") from err
         if d.get("distortion_model", "plumb_bob") not in ("plumb_bob", "rational_polynomial"):
             raise ConfigError(f"{p}: unsupported distortion_model {d.get('distortion_model')!r}")
@@ -373,8 +373,6 @@ def vehicle_from_mapping(data: Any, *, base: Path, display: str = "vehicle.yaml"
         f = _VehicleFile.model_validate(data)
         stereo = _stereo(f.stereo, base) if f.stereo is not None else None
     except ValidationError as err:
-        from auvnav.dive import pydantic_problems
-
         raise ConfigError("\n".join(str(p) for p in pydantic_problems(err, display))) from err
     except ValueError as err:
         raise ConfigError(f"{display}: key stereo: {err}") from err
@@ -398,8 +396,6 @@ def vehicle_from_mapping(data: Any, *, base: Path, display: str = "vehicle.yaml"
 
 def vehicle_problems(path: Path, *, display: str = "vehicle.yaml") -> tuple[Vehicle | None, list[Problem]]:
     """Read vehicle.yaml, returning the vehicle or the problems found (never raises for content)."""
-    from auvnav.dive import load_yaml
-
     data, problems = load_yaml(path, display)
     if problems:
         return None, problems
@@ -459,7 +455,7 @@ def vehicle_to_mapping(v: Vehicle) -> dict[str, Any]:
 
 def write_vehicle(v: Vehicle, path: Path) -> None:
     """Write vehicle.yaml (inline stereo calibration)."""
-    path.write_text(yaml.safe_dump(vehicle_to_mapping(v), sort_keys=False), encoding="utf-8")
+    path.write_text(dump_yaml(vehicle_to_mapping(v)), encoding="utf-8")
 
 
 def mount_rpy_rad(m: Mount) -> tuple[float, float, float]:

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from auvnav.compass import DeviationModel, EarthField, decimal_year2posix, earth_field
+from auvnav.compass.deviation import DeviationModel
+from auvnav.compass.field import EarthField, decimal_year2posix, earth_field
 
 # NOAA NCEI official WMM test values, as stored in ../shared/reference/magnetic_model_wmm/ (see its
 # PROVENANCE.md). Rows the pygeomag author changed ("# Changed values ...") or added ("# Additional

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 import yaml
 
-from auvnav.compass import FitRecord, fit_deviation, read_correction, write_correction
+from auvnav.compass.correction import FitRecord, read_correction, write_correction
+from auvnav.compass.deviation import fit_deviation
 from auvnav.errors import ConfigError, OutputExistsError
 from auvnav.frames import wrap_angle
 
@@ -104,7 +105,7 @@ def test_strict_reader_names_file_and_key(fit, tmp_path: Path, edit, message: st
 def test_bad_yaml_names_the_line(tmp_path: Path) -> None:
     path = tmp_path / "c.yaml"
     path.write_text("format: auvnav-compass-correction/1\nmodel: [fourier\n")
-    with pytest.raises(ConfigError, match=rf"{path.name}: line \d+: "):
+    with pytest.raises(ConfigError, match=rf"{path.name}: not valid YAML at line \d+: "):
         read_correction(path)
 
 

@@ -10,15 +10,15 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from auvnav.compass import (
+from auvnav.compass.deviation import (
     DeviationModel,
-    deviation_from_iron,
     fit_deviation,
     fix_constant,
     fourier_design,
     heading_gaps,
     transit_deviation,
 )
+from auvnav.compass.magnetometer import deviation_from_iron
 from auvnav.errors import InsufficientDataError
 from auvnav.frames import angle_diff, wrap_angle
 

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from auvnav.compass import (
+from auvnav.compass.field import (
     GeomagneticModelError,
     decimal_year2posix,
     earth_field,

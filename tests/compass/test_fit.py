@@ -15,15 +15,10 @@ import pytest
 import yaml
 
 from auvnav.cli import main
-from auvnav.compass import (
-    DeviationModel,
-    compass_section,
-    fit_deviation,
-    magnetic2true,
-    read_correction,
-    read_true_deviation,
-    write_correction,
-)
+from auvnav.compass.correction import read_correction, write_correction
+from auvnav.compass.deviation import DeviationModel, fit_deviation
+from auvnav.compass.evaluate import compass_section, read_true_deviation
+from auvnav.compass.field import magnetic2true
 from auvnav.compass.fit import (
     DVL_YAW_SIGMA_DEG,
     HeadingPairs,
@@ -33,7 +28,8 @@ from auvnav.compass.fit import (
 )
 from auvnav.dive import Dive, GpsStream
 from auvnav.frames import euler2rot, geodetic2ned, ned2geodetic, wrap_angle
-from auvnav.nav import dead_reckon, nav_inputs
+from auvnav.nav.deadreckon import dead_reckon
+from auvnav.nav.inputs import nav_inputs
 from auvnav.nav.synthetic import Noise, legs_motion, synthetic_dive
 from auvnav.trajectory import Trajectory, read_trajectory, write_trajectory
 from auvnav.vehicle import Mount
@@ -388,7 +384,8 @@ def test_default_output_is_a_product_that_evaluate_finds(simulated, tmp_path: Pa
     shutil.copytree(simulated.navcheck, dive)
     summary = _fit_json(capsys, str(dive), "--reference", "truth")
     assert summary["correction"] == str(dive / "products" / "compass" / "correction.yaml")
-    assert (dive / "products" / "compass" / "correction.png").is_file()
+    assert summary["figure"] == str(dive / "products" / "report" / "figures" / "fig5_compass.png")
+    assert (dive / "products" / "report" / "figures" / "fig5_compass.png").is_file()
     capsys.readouterr()
     assert main(["evaluate", str(dive), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["compass"]["constant_source"] == "truth"

@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from auvnav.compass import (
-    EarthField,
+from auvnav.compass.field import EarthField
+from auvnav.compass.magnetometer import (
     MagnetometerCalibration,
     calibrate_magnetometer,
     deviation_from_iron,

@@ -17,14 +17,14 @@ import pytest
 
 from auvnav.cli import main
 from auvnav.depth.estimation import CANDIDATES, estimate_tide, rayleigh_groups, resolving_record_s
+from auvnav.depth.evaluate import depth_section
 from auvnav.depth.pressure import DBAR_TO_PA, depth_from_pressure, pressure_from_depth
 from auvnav.depth.tide import Constituent, TideModel, read_constituents, write_constituents
 from auvnav.depth.validation import (
     DepthResult,
     LoopDepth,
     PressureDepth,
-    check_loops,
-    depth_section,
+    check_loop_depths,
     loop_depth,
     loop_vertical_m,
 )
@@ -133,7 +133,7 @@ def loops_from_truth(
 def synthetic_check(
     seed: int, *, start_s: float = T0_S, hours: float = 4.0, revisit_s: float = 1500.0
 ) -> DepthResult:
-    """The synthetic navigation check through :func:`check_loops` with the true tide and an estimate."""
+    """The synthetic navigation check through :func:`check_loop_depths` with the true tide and an estimate."""
     rng = np.random.default_rng(seed)
     t = start_s + np.arange(0.0, hours * 3600.0, 1.0)
     x = t - start_s
@@ -145,7 +145,7 @@ def synthetic_check(
     R = euler2rot(*attitude_rad(x, rng))
     i, j = revisit_loops(t, hours, revisit_s, rng)
     loops = loops_from_truth(t, i, j, z, R, rng)
-    return check_loops(
+    return check_loop_depths(
         record,
         loops,
         R[i],
@@ -185,9 +185,13 @@ def test_far_apart_residual_after_true_tide_meets_acceptance(navcheck: DepthResu
 
 def test_tide_estimated_from_loops_reproduces_true_change(navcheck: DepthResult) -> None:
     loops, estimate = navcheck.loops, navcheck.estimate
-    assert estimate is not None and navcheck.estimate_change_m is not None and loops.tide_change_m is not None
+    assert (
+        estimate is not None
+        and navcheck.loops.estimated_change_m is not None
+        and loops.tide_change_m is not None
+    )
     far = loops.dt_s > FAR_APART_S
-    assert rms((navcheck.estimate_change_m - loops.tide_change_m)[far]) <= ACCEPT_ESTIMATE_M
+    assert rms((navcheck.loops.estimated_change_m - loops.tide_change_m)[far]) <= ACCEPT_ESTIMATE_M
     # A 4 h record resolves no constituent: one effective sinusoid at the M2 frequency.
     assert [c.name for c in estimate.constituents] == ["M2"]
     assert not estimate.constituents[0].resolved
@@ -202,10 +206,10 @@ def test_estimated_tide_uncertainty_is_calibrated() -> None:
     for seed in range(10, 18):
         result = synthetic_check(seed, start_s=T0_S + 0.37 * seed * 86400.0)
         loops, estimate = result.loops, result.estimate
-        assert estimate is not None and result.estimate_change_m is not None
+        assert estimate is not None and result.loops.estimated_change_m is not None
         assert loops.tide_change_m is not None
         far = loops.dt_s > FAR_APART_S
-        error = rms((result.estimate_change_m - loops.tide_change_m)[far])
+        error = rms((result.loops.estimated_change_m - loops.tide_change_m)[far])
         quoted = rms(estimate.change_sigma_m(loops.t_i_s, loops.t_j_s)[far])
         ratios.append(error / quoted)
     assert 0.5 <= rms(np.array(ratios)) <= 2.0
@@ -244,7 +248,7 @@ def test_rising_tide_gives_positive_residual() -> None:
         cov_upper=diagonal_cov(2, [1e-6] * 6),
         inliers=np.array([50, 50]),
     )
-    result = check_loops(record, loops, R, latitude_rad=LATITUDE_RAD, tilt_sigma_rad=0.0)
+    result = check_loop_depths(record, loops, R, latitude_rad=LATITUDE_RAD, tilt_sigma_rad=0.0)
     np.testing.assert_allclose(result.loops.residual_before_m, eta[j] - eta[i], atol=1e-9)
     assert np.all(result.loops.residual_before_m > 0)
     assert result.loops.residual_after_m is None
@@ -415,13 +419,14 @@ def run(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, 
 
 def test_command_writes_products(dive_folder: Path, capsys: pytest.CaptureFixture[str]) -> None:
     tide_file = dive_folder / "truth" / "tide.csv"
-    args = ["depth", str(dive_folder), "--tide", str(tide_file), "--estimate-tide", "--json", "--overwrite"]
+    args = ["depth", str(dive_folder), "--tide", str(tide_file), "--estimate-tide", "--json"]
     code, out, err = run(args, capsys)
     assert code == 0, err
     summary = json.loads(out)
     products = dive_folder / "products" / "depth"
-    for name in ("loop_depth.csv", "summary.json", "fig_depth.png", "tide_estimated.csv"):
+    for name in ("loop_depth.csv", "summary.json", "tide_estimated.csv"):
         assert (products / name).is_file()
+    assert (dive_folder / "products" / "report" / "figures" / "fig6_depth.png").is_file()
     assert json.loads((products / "summary.json").read_text()) == summary
     far = summary["far_apart"]
     assert far["n"] > 50
@@ -444,13 +449,15 @@ def test_command_writes_products(dive_folder: Path, capsys: pytest.CaptureFixtur
     assert section["residual_rms_true_tide_m"] == pytest.approx(summary["residual_rms_after_m"])
     assert section["estimated_tide_change_rmse_far_apart_m"] < ACCEPT_ESTIMATE_M
 
+    # A rerun replaces the stage's products as one set: nothing of the estimate is left over.
     code, _, err = run(["depth", str(dive_folder), "--tide", str(tide_file)], capsys)
-    assert code == 1
-    assert len(err) == 1 and "--overwrite" in err[0]
+    assert code == 0, err
+    assert not (products / "tide_estimated.csv").exists()
+    assert json.loads((products / "summary.json").read_text())["estimated_tide"] is None
 
 
 def test_command_estimates_without_tide(dive_folder: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    code, out, err = run(["depth", str(dive_folder), "--estimate-tide", "--overwrite"], capsys)
+    code, out, err = run(["depth", str(dive_folder), "--estimate-tide"], capsys)
     assert code == 0, err
     assert "tide correction: estimated" in out
     summary = json.loads((dive_folder / "products" / "depth" / "summary.json").read_text())
@@ -465,7 +472,7 @@ def test_command_removes_an_atmospheric_series(
     series = tmp_path / "atmospheric.csv"
     series.write_text(f"t,pressure_dbar\n{T0_S},10.0\n{T0_S + 7200.0},11.0\n")
     tide_file = dive_folder / "truth" / "tide.csv"
-    args = ["depth", str(dive_folder), "--tide", str(tide_file), "--atmospheric", str(series), "--overwrite"]
+    args = ["depth", str(dive_folder), "--tide", str(tide_file), "--atmospheric", str(series)]
     code, _, err = run(args, capsys)
     assert code == 0, err
     summary = json.loads((dive_folder / "products" / "depth" / "summary.json").read_text())
@@ -498,7 +505,7 @@ def test_command_rejects_bad_loop_files(
     header = "i,j,t_i,t_j,x_m,y_m,z_m,roll_deg,pitch_deg,yaw_deg," + ",".join(COV_COLUMNS) + ",inliers\n"
     bad = tmp_path / "loops.csv"
     bad.write_text(header + rows)
-    code, _, err = run(["depth", str(dive_folder), "--loops", str(bad), "--overwrite"], capsys)
+    code, _, err = run(["depth", str(dive_folder), "--loops", str(bad)], capsys)
     assert code == 1
     assert message in "\n".join(err)
     assert all(line.startswith("auvnav: error: ") for line in err)
@@ -526,6 +533,6 @@ def test_command_rejects_bad_tide_file(
 ) -> None:
     bad = tmp_path / "tide.csv"
     bad.write_text("name,amplitude_m,phase_deg\nM9,1.0,10\n")
-    code, _, err = run(["depth", str(dive_folder), "--tide", str(bad), "--overwrite"], capsys)
+    code, _, err = run(["depth", str(dive_folder), "--tide", str(bad)], capsys)
     assert code == 1
     assert len(err) == 1 and "unknown constituent 'M9'" in err[0]

@@ -14,8 +14,9 @@ from auvnav.cli import main
 from auvnav.compass.correction import write_correction
 from auvnav.compass.deviation import DeviationModel
 from auvnav.dive import write_dive
-from auvnav.nav.products import run_navigation
+from auvnav.nav.stage import NavSettings
 from auvnav.nav.synthetic import Motion, Noise, synthetic_dive
+from auvnav.pipeline import run_stage
 from auvnav.trajectory import read_trajectory
 
 DEG = math.pi / 180.0
@@ -57,6 +58,7 @@ def test_navigate_writes_the_products(dive_path: Path, capsys) -> None:
         "filter.csv",
         "filter.tum",
         "innovations.csv",
+        "stage.json",
         "summary.json",
     ]
     assert list(pd.read_csv(nav / "dr.csv").columns) == TRAJECTORY_COLUMNS
@@ -86,7 +88,7 @@ def test_navigate_json_and_rerun_replaces_products(dive_path: Path, capsys) -> N
 def test_compass_correction_option_applies_the_file(dive_path: Path, tmp_path: Path) -> None:
     correction = tmp_path / "correction.yaml"
     write_correction(DeviationModel.from_coefficients([-3 * DEG, 0.0, 0.0]), correction)
-    summary = run_navigation(dive_path, compass_correction=correction)
+    summary = run_stage(dive_path, "nav", NavSettings(compass_correction=correction))
     assert summary["compass_correction"] == str(correction)
     assert summary["end_fix"]["dr_error_m"] < 10.0  # the fixes alone are 3 m (1 sigma per axis) off
 

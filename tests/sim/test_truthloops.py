@@ -11,68 +11,19 @@ import pytest
 import yaml
 
 from auvnav.cli import main
-from auvnav.frames import angle_diff, euler2rot, rot2euler, se3, se3_inverse
-from auvnav.sim.camera import body_poses, default_stereo_rig
+from auvnav.dive import ImageIndex
+from auvnav.frames import angle_diff, rot2euler, se3_inverse
+from auvnav.sim.camera import body_poses
 from auvnav.sim.truthloops import (
     FALSE_OFFSET_M,
     MAX_PER_IMAGE,
     SIGMA_ROTATION_RAD,
     SIGMA_TRANSLATION_M,
-    footprints,
-    polygon_overlap,
     truth_loops,
 )
+from auvnav.streams import read_stream
 from auvnav.trajectory import Trajectory
 from auvnav.vision.loopfile import read_loops
-
-UNIT = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
-
-
-class FlatFloor:
-    """A horizontal seafloor at ``depth`` metres."""
-
-    def __init__(self, depth: float) -> None:
-        self.depth = depth
-
-    def depth_m(self, north_m: np.ndarray, east_m: np.ndarray) -> np.ndarray:
-        return np.full(np.shape(north_m), self.depth)
-
-
-# Overlap of the unit square with shifted or scaled copies: intersection over the smaller area.
-OVERLAPS = [
-    (UNIT + np.array([0.5, 0.0]), 0.5),
-    (UNIT + np.array([0.5, 0.5]), 0.25),
-    (UNIT + np.array([1.5, 0.0]), 0.0),
-    (0.5 * UNIT + 0.25, 1.0),  # contained
-    (2.0 * UNIT - 0.5, 1.0),  # contains
-    (UNIT[::-1] + np.array([0.0, 0.75]), 0.25),  # clockwise order
-]
-
-
-@pytest.mark.parametrize(("other", "expected"), OVERLAPS)
-def test_polygon_overlap(other: np.ndarray, expected: float) -> None:
-    assert polygon_overlap(UNIT, other) == pytest.approx(expected, abs=1e-12)
-    assert polygon_overlap(other, UNIT) == pytest.approx(expected, abs=1e-12)
-
-
-def test_footprint_of_a_level_camera_is_its_image_rectangle() -> None:
-    """Level vehicle heading north, camera 1.7 m above a flat floor: the footprint is the image's
-    rectangle scaled by height / focal length, across track along image x (body right)."""
-    rig = default_stereo_rig()
-    T = se3(euler2rot(0.0, 0.0, 0.0)[None], np.array([[10.0, 20.0, 8.0]]))
-    height = 10.0 - 8.0 - rig.mount.lever_arm_body_m[2]
-    poly = footprints(T, rig, FlatFloor(10.0))[0]
-    K = rig.left.K
-    across = height * rig.left.width / K[0, 0]
-    along = height * rig.left.height / K[1, 1]
-    assert np.ptp(poly[:, 1]) == pytest.approx(across, rel=1e-9)
-    assert np.ptp(poly[:, 0]) == pytest.approx(along, rel=1e-9)
-    # The optical centre's ground point is the camera's position plus the principal point's offset.
-    centre = np.array([10.0, 20.0]) + rig.mount.lever_arm_body_m[:2]
-    offset = height * np.array(
-        [-(K[1, 2] - rig.left.height / 2) / K[1, 1], (K[0, 2] - rig.left.width / 2) / K[0, 0]]
-    )
-    np.testing.assert_allclose(poly.mean(axis=0), centre - offset, atol=1e-9)
 
 
 def _lawnmower(lines: int = 4, line_m: float = 20.0, spacing_m: float = 1.0) -> Trajectory:
@@ -97,10 +48,10 @@ def _lawnmower(lines: int = 4, line_m: float = 20.0, spacing_m: float = 1.0) -> 
 
 
 @pytest.fixture(scope="module")
-def lawnmower_loops():
+def lawnmower_loops(level_floor):
     truth = _lawnmower()
     times = truth.t_s[0] + np.arange(0.0, truth.t_s[-1] - truth.t_s[0], 1.0)
-    return truth, times, truth_loops(truth, FlatFloor(10.0), times, false_fraction=0.2, seed=5)
+    return truth, times, truth_loops(truth, level_floor(10.0), times, false_fraction=0.2, seed=5)
 
 
 def test_loops_join_consecutive_pairs_and_adjacent_lines(lawnmower_loops) -> None:
@@ -156,23 +107,23 @@ def test_false_loops_are_a_fraction_of_the_rows_and_wrong(lawnmower_loops) -> No
     assert np.all(true_distance - claimed > 0.5)  # the footprints do not overlap; the claim says they do
 
 
-def test_same_seed_same_loops() -> None:
+def test_same_seed_same_loops(level_floor) -> None:
     truth = _lawnmower(lines=2)
     times = truth.t_s[0] + np.arange(0.0, 70.0, 1.0)
-    a = truth_loops(truth, FlatFloor(10.0), times, false_fraction=0.1, seed=3)
-    b = truth_loops(truth, FlatFloor(10.0), times, false_fraction=0.1, seed=3)
-    c = truth_loops(truth, FlatFloor(10.0), times, false_fraction=0.1, seed=4)
+    a = truth_loops(truth, level_floor(10.0), times, false_fraction=0.1, seed=3)
+    b = truth_loops(truth, level_floor(10.0), times, false_fraction=0.1, seed=3)
+    c = truth_loops(truth, level_floor(10.0), times, false_fraction=0.1, seed=4)
     np.testing.assert_array_equal(a.loops.t_ij_m, b.loops.t_ij_m)
     assert not np.array_equal(a.loops.t_ij_m, c.loops.t_ij_m)
 
 
 def test_simulate_writes_truth_loops(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """``auvnav simulate --truth-loops --false-loops``: image times, loops and their record."""
+    """``auvnav simulate --truth-loops --false-loops``: the camera's trigger log, loops and their record."""
     out = tmp_path / "dive"
     args = ["simulate", "navcheck", "--out", str(out), "--headings", "2", "--leg-m", "6", "--grid-m", "2"]
     args += ["--no-images", "--truth-loops"]
     assert main([*args, "--false-loops", "0.25", "--json", "-q"]) == 0
-    times = np.loadtxt(out / "truth" / "image_times.csv", skiprows=1, delimiter=",", ndmin=1)
+    times = read_stream(ImageIndex, out / "images" / "index.csv").t_s
     loops = read_loops(out / "truth" / "loops.csv", n_poses=len(times))
     info = yaml.safe_load((out / "truth" / "loops.yaml").read_text(encoding="utf-8"))
     assert info["false_fraction"] == 0.25

@@ -12,19 +12,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from auvnav.frames import euler2rot, rot2euler, se3, se3_inverse, wrap_angle
-from auvnav.nav import FilterConfig, nav_inputs
+from auvnav.nav.filter import FilterConfig
+from auvnav.nav.inputs import nav_inputs
 from auvnav.nav.synthetic import Noise, legs_motion, synthetic_dive
 from auvnav.slam.compass import COEFFICIENTS_KEY, CompassModel, heading_factor, yaw_jacobian
-from auvnav.slam.graph import (
-    MERGE_S,
-    UNMEASURED_SIGMA_M,
-    build_pose_times,
-    dvl_odometry,
-    loop_covariance_tangent,
-    pose_key,
-    pose_measurements,
-    position_factor,
-)
+from auvnav.slam.graph import UNMEASURED_SIGMA_M, dvl_odometry, loop_covariance_tangent, position_factor
+from auvnav.slam.poses import MERGE_S, build_pose_times, pose_key, pose_measurements
 from auvnav.vehicle import Mount, Vehicle
 from auvnav.vision.loopfile import loops_from_transforms
 

@@ -19,11 +19,14 @@ from auvnav.compass.deviation import DeviationModel
 from auvnav.compass.evaluate import compass_section, read_true_deviation
 from auvnav.dive import read_dive
 from auvnav.evaluate import evaluate_dive, read_truth, score_trajectory
-from auvnav.nav import dead_reckon, nav_inputs
+from auvnav.nav.deadreckon import dead_reckon
+from auvnav.nav.inputs import nav_inputs
+from auvnav.pipeline import run_stage
 from auvnav.sim.truthloops import write_truth_loops
 from auvnav.slam.g2o import read_g2o
-from auvnav.slam.graph import SlamOptions, read_image_times
-from auvnav.slam.products import run_slam, slam
+from auvnav.slam.graph import SlamOptions
+from auvnav.slam.result import slam
+from auvnav.slam.stage import SlamSettings
 from auvnav.trajectory import read_trajectory
 from auvnav.vision.loopfile import read_loops
 
@@ -75,7 +78,7 @@ def test_slam_is_consistent_where_dead_reckoning_is_not(dive: Path, batch: dict)
 
 def test_products(dive: Path, batch: dict) -> None:
     summary, traj = batch["summary"], batch["trajectory"]
-    times, _ = read_image_times(dive, read_dive(dive))
+    times = read_dive(dive).images.t_s
     np.testing.assert_allclose(traj.t_s, times)  # one pose per stereo pair
     assert traj.sigma_ned_m is not None and traj.sigma_yaw_rad is not None
     assert np.all((traj.sigma_ned_m > 0) & (traj.sigma_ned_m < 5.0))
@@ -92,11 +95,9 @@ def test_products(dive: Path, batch: dict) -> None:
 
 def test_incremental_agrees_with_batch(dive: Path, batch: dict) -> None:
     d = read_dive(dive)
-    times, source = read_image_times(dive, d)
+    times = d.images.t_s
     loops = read_loops(dive / "truth" / "loops.csv", n_poses=len(times))
-    result = slam(
-        d, times, image_source=source, loops=loops, options=SlamOptions(incremental=True, marginal_every=0)
-    )
+    result = slam(d, times, loops=loops, options=SlamOptions(incremental=True, marginal_every=0))
     assert result.solution.method == "isam2"
     difference = result.trajectory.p_ned_m - batch["trajectory"].p_ned_m
     assert np.sqrt(np.mean(np.sum(difference**2, axis=1))) < 0.02
@@ -107,11 +108,12 @@ def test_incremental_agrees_with_batch(dive: Path, batch: dict) -> None:
 def test_estimated_deviation_matches_the_true_curve(dive: Path) -> None:
     """--estimate-compass with no reference heading: the deviation's shape within 0.15 deg RMS on this
     13-minute dive (the full navigation check's acceptance is 0.1 deg; benchmarks/bench_slam_dive.py)."""
-    summary = run_slam(
-        dive, loops=dive / "truth" / "clean.csv", estimate_compass=True, robust="none", marginal_every=50
+    settings = SlamSettings(
+        loops=dive / "truth" / "clean.csv", estimate_compass=True, robust="none", marginal_every=50
     )
+    summary = run_stage(dive, "slam", settings)
     assert summary["compass"]["mode"] == "estimated"
-    path = dive / "products" / "slam" / "compass_correction.yaml"
+    path = dive / "products" / "slam" / "correction.yaml"
     scores = compass_section(dive, path)
     _, delta = read_true_deviation(dive)
     assert np.degrees(np.std(delta)) > 0.8  # there is a deviation to find
@@ -165,7 +167,7 @@ def test_missing_inputs_and_conflicting_options_are_one_line_errors(
 ) -> None:
     assert main(["slam", str(dive), "-q"]) == 1  # no products/vision/loops.csv
     err = _errors(capsys)
-    assert len(err) == 1 and "products/vision/loops.csv: not found" in err[0]
+    assert len(err) == 1 and "no loop closures" in err[0] and "products/vision/loops.csv" in err[0]
 
     correction = tmp_path / "correction.yaml"
     write_correction(DeviationModel(0.0, np.array([0.01]), np.array([0.0])), correction)
@@ -183,7 +185,7 @@ def test_missing_inputs_and_conflicting_options_are_one_line_errors(
     assert _errors(capsys) == ["auvnav: error: give --compass-correction or --estimate-compass, not both"]
 
     no_images = tmp_path / "no-images"
-    shutil.copytree(dive, no_images, ignore=shutil.ignore_patterns("products", "image_times.csv"))
+    shutil.copytree(dive, no_images, ignore=shutil.ignore_patterns("products", "images"))
     assert main(["slam", str(no_images), "--loops", loops, "-q"]) == 1
     err = _errors(capsys)
-    assert len(err) == 1 and "images/index.csv: not found" in err[0]
+    assert len(err) == 1 and "no images/index.csv" in err[0]

@@ -81,7 +81,7 @@ def tiny_dive(tmp_path_factory) -> TinyDive:
     )
     write_dive(dive, root)
     times = START_S + np.arange(0.5, 20.0, 1.0)
-    render_images(truth, floor, rig, times, root / "images", seed=3, workers=1)
+    render_images(truth, floor, rig, times, root / "images", seed=3)
     write_trajectory(truth, root / "truth" / "trajectory.csv")
     # The navigation prior: the truth plus a drift of 2% of the distance travelled, to the east.
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(truth.p_ned_m[:, :2], axis=0), axis=1))])
@@ -92,16 +92,7 @@ def tiny_dive(tmp_path_factory) -> TinyDive:
     return TinyDive(root, truth, floor)
 
 
-@dataclass(frozen=True)
-class FlatFloor:
-    """A level seafloor at ``base_m``."""
-
-    base_m: float = 20.0
-
-    def depth_m(self, north_m, east_m):
-        return np.full(np.broadcast_shapes(np.shape(north_m), np.shape(east_m)), self.base_m)
-
-
 @pytest.fixture
-def flat_floor() -> FlatFloor:
-    return FlatFloor()
+def flat_floor(level_floor):
+    """A level seafloor 20 m down."""
+    return level_floor(20.0)

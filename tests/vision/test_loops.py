@@ -19,7 +19,8 @@ from auvnav.vision.camera import rectification
 from auvnav.vision.evaluate import loops_section
 from auvnav.vision.features import FeatureSettings
 from auvnav.vision.loopfile import read_loops
-from auvnav.vision.loops import LoopSettings, find_loops, read_prior
+from auvnav.vision.loops import LoopSettings, find_loops
+from auvnav.vision.stage import read_prior
 from auvnav.vision.stereo import cache_path, pair_features, read_features
 
 FAST = LoopSettings(features=FeatureSettings(max_features=1500))
@@ -55,7 +56,7 @@ def test_command_writes_loops_that_match_the_truth(tiny_dive, loops_run) -> None
 
 
 def test_features_are_cached(tiny_dive, loops_run) -> None:
-    cache = tiny_dive.path / "products" / "vision" / "features"
+    cache = tiny_dive.path / "products" / "cache" / "vision" / "features"
     files = sorted(cache.iterdir())
     assert len(files) == loops_run["pairs_with_features"]
     dive = read_dive(tiny_dive.path)
@@ -92,13 +93,13 @@ def test_a_corrupt_feature_cache_is_recomputed(tiny_dive, tmp_path: Path, caplog
 
 def test_missing_and_corrupt_images_are_skipped_with_a_warning(tiny_dive, tmp_path: Path, caplog) -> None:
     copy = tmp_path / "dive"
-    shutil.copytree(tiny_dive.path, copy, ignore=shutil.ignore_patterns("features"))
+    shutil.copytree(tiny_dive.path, copy, ignore=shutil.ignore_patterns("cache"))
     index = copy / "images" / "index.csv"
     index.write_text("\n".join(index.read_text().splitlines()[:9]) + "\n")  # the first 8 pairs
     (copy / "images" / "left" / "000003.png").unlink()
     (copy / "images" / "right" / "000007.png").write_bytes(b"not a png")
     with caplog.at_level(logging.WARNING):
-        result = find_loops(read_dive(copy), read_prior(copy), workers=1, settings=FAST)
+        result = find_loops(read_dive(copy), read_prior(copy), settings=FAST)
     text = caplog.text
     assert "000003.png: image missing" in text
     assert "000007.png: not a readable image" in text

@@ -28,7 +28,7 @@ from auvnav.compass.magnetometer import CalibrationMethod, calibrate_magnetomete
 from auvnav.dive import read_dive
 from auvnav.errors import DiveFormatError, Problem
 from auvnav.frames import FloatArray, angle_diff, wrap_angle
-from auvnav.nav import declination
+from auvnav.nav.inputs import declination
 from auvnav.trajectory import read_trajectory
 
 TRUTH_DIR = Path("truth")

@@ -33,10 +33,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from auvnav.compass.deviation import CONSTANT_SOURCES, DeviationFit, DeviationModel
+from auvnav.config import dump_yaml, load_yaml, quote
 from auvnav.errors import ConfigError, OutputExistsError
+from auvnav.streams import atomic_write
 
 FORMAT = "auvnav-compass-correction/1"
 MODEL = "fourier"
@@ -45,10 +46,6 @@ TABLE_ROWS = 360
 # was edited by hand.
 _TABLE_DECIMALS = 4
 _TABLE_TOLERANCE_DEG = 1e-3
-
-# libyaml's parser and emitter when PyYAML was built with them (same documents, several times faster).
-_Loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
-_Dumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 
 _REQUIRED = ("format", "model", "harmonics", "a0_deg", "a_deg", "b_deg", "constant", "table")
 _OPTIONAL = ("residual_rms_deg", "covariance_deg2", "gaps_deg", "fit")
@@ -153,39 +150,38 @@ def write_correction(
     if record is not None and record.reference is not None:
         doc["fit"] = {"reference": record.reference, "dives": list(record.dives), "pairs": record.pairs}
     doc["table"] = _table(model)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    text = yaml.dump(doc, Dumper=_Dumper, sort_keys=False, default_flow_style=None, width=100)
-    path.write_text(_HEADER + text, encoding="utf-8")
+    text = _HEADER + dump_yaml(doc, default_flow_style=None, width=100)
+    atomic_write(path, lambda p: p.write_text(text, encoding="utf-8"))
 
 
 def _number(path: Path, key: str, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ConfigError(f"{path}: {key}: expected a finite number; found {value!r}")
+        raise ConfigError(f"{path}: {key}: expected a finite number; found {quote(value)}")
     return float(value)
 
 
 def _numbers(path: Path, key: str, value: Any, n: int) -> np.ndarray:
     if not isinstance(value, list) or len(value) != n:
-        raise ConfigError(f"{path}: {key}: expected a list of {n} numbers; found {value!r}")
+        raise ConfigError(f"{path}: {key}: expected a list of {n} numbers; found {quote(value)}")
     return np.array([_number(path, f"{key}[{i}]", v) for i, v in enumerate(value)])
 
 
 def _count(path: Path, key: str, value: Any) -> int:
     if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-        raise ConfigError(f"{path}: {key}: expected a non-negative integer; found {value!r}")
+        raise ConfigError(f"{path}: {key}: expected a non-negative integer; found {quote(value)}")
     return value
 
 
 def _names(path: Path, key: str, value: Any) -> list[str]:
     if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-        raise ConfigError(f"{path}: {key}: expected a list of names; found {value!r}")
+        raise ConfigError(f"{path}: {key}: expected a list of names; found {quote(value)}")
     return value
 
 
 def _keys(path: Path, where: str, doc: Any, required: tuple[str, ...], optional: tuple[str, ...]) -> None:
     """Raise ConfigError for an unknown or missing key of the mapping ``doc`` at ``where``."""
     if not isinstance(doc, dict):
-        raise ConfigError(f"{path}: {where or 'document'}: expected a mapping; found {doc!r}")
+        raise ConfigError(f"{path}: {where or 'document'}: expected a mapping; found {quote(doc)}")
     prefix = f"{where}." if where else ""
     for key in doc:
         if key not in required + optional:
@@ -211,24 +207,18 @@ def read_correction(path: str | Path) -> DeviationModel:
     Raises
     ------
     ConfigError
-        Bad YAML, an unknown or missing key, a wrong type or size, or a table that disagrees with
-        the coefficients; one line naming the file and the key.
-    FileNotFoundError
-        ``path`` does not exist.
+        No such file, bad YAML, an unknown or missing key, a wrong type or size, or a table that
+        disagrees with the coefficients; one line naming the file and the key.
     """
     path = Path(path)
-    try:
-        doc = yaml.load(path.read_text(encoding="utf-8"), Loader=_Loader)
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f"line {mark.line + 1}: " if mark is not None else ""
-        problem = getattr(err, "problem", None) or "invalid YAML"
-        raise ConfigError(f"{path}: {where}{problem}") from err
+    doc, problems = load_yaml(path, str(path))
+    if problems:
+        raise ConfigError(str(problems[0]))
     _keys(path, "", doc, _REQUIRED, _OPTIONAL)
     if doc["format"] != FORMAT:
-        raise ConfigError(f"{path}: format: expected {FORMAT!r}; found {doc['format']!r}")
+        raise ConfigError(f"{path}: format: expected {FORMAT!r}; found {quote(doc['format'])}")
     if doc["model"] != MODEL:
-        raise ConfigError(f"{path}: model: expected {MODEL!r}; found {doc['model']!r}")
+        raise ConfigError(f"{path}: model: expected {MODEL!r}; found {quote(doc['model'])}")
     n = _count(path, "harmonics", doc["harmonics"])
     a0 = _number(path, "a0_deg", doc["a0_deg"])
     a = _numbers(path, "a_deg", doc["a_deg"], n)
@@ -237,7 +227,7 @@ def read_correction(path: str | Path) -> DeviationModel:
     source = doc["constant"]["source"]
     if source not in CONSTANT_SOURCES:
         raise ConfigError(
-            f"{path}: constant.source: expected one of {', '.join(CONSTANT_SOURCES)}; found {source!r}"
+            f"{path}: constant.source: expected one of {', '.join(CONSTANT_SOURCES)}; found {quote(source)}"
         )
     for key in ("sigma_deg", "transit_rms_deg"):
         if doc["constant"].get(key) is not None:
@@ -249,7 +239,9 @@ def read_correction(path: str | Path) -> DeviationModel:
     if "fit" in doc:
         _keys(path, "fit", doc["fit"], _FIT_KEYS, ())
         if not isinstance(doc["fit"]["reference"], str):
-            raise ConfigError(f"{path}: fit.reference: expected a string; found {doc['fit']['reference']!r}")
+            raise ConfigError(
+                f"{path}: fit.reference: expected a string; found {quote(doc['fit']['reference'])}"
+            )
         _names(path, "fit.dives", doc["fit"]["dives"])
         if doc["fit"]["pairs"] is not None:
             _count(path, "fit.pairs", doc["fit"]["pairs"])

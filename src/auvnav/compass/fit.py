@@ -42,22 +42,17 @@ from numpy.typing import NDArray
 from auvnav.compass.correction import FitRecord
 from auvnav.compass.deviation import DeviationFit, fit_deviation, fix_constant, transit_deviation
 from auvnav.compass.field import true2magnetic
+from auvnav.compass.reference import REFERENCE_FILES, reference_file
 from auvnav.dive import Dive, GpsStream, read_dive
 from auvnav.errors import ConfigError, DiveFormatError, InsufficientDataError, Problem
 from auvnav.frames import FloatArray, geodetic2ned, ned2geodetic, rot2euler, wrap_angle
-from auvnav.nav import TransitLeg, course_made_good, dead_reckon, declination, nav_inputs
-from auvnav.nav.inputs import SURFACE_GAP_S
+from auvnav.nav.cmg import TransitLeg, course_made_good
+from auvnav.nav.deadreckon import dead_reckon
+from auvnav.nav.inputs import SURFACE_GAP_S, declination, nav_inputs
 from auvnav.trajectory import Trajectory, read_trajectory
 
 log = logging.getLogger(__name__)
 
-#: Reference names and their files in a dive folder; anything else names a trajectory file.
-REFERENCE_FILES: dict[str, Path] = {
-    "truth": Path("truth") / "trajectory.csv",
-    "slam": Path("products") / "slam" / "trajectory.csv",
-}
-PRODUCTS_DIR = Path("products") / "compass"
-CORRECTION_FILE = "correction.yaml"
 
 #: Pairs per second kept: neighbouring compass samples at 10 Hz share their errors (tilt motion,
 #: the reference's smoothing), so more would only make the covariance optimistic.
@@ -183,23 +178,19 @@ def reference_trajectory(dive_path: Path, reference: str) -> Trajectory:
         No such trajectory file.
     """
     dive_path = Path(dive_path)
-    if reference in REFERENCE_FILES:
-        path = dive_path / REFERENCE_FILES[reference]
-        if not path.is_file():
-            hint = (
-                "only simulated dives have a truth"
-                if reference == "truth"
-                else f"run `auvnav slam {dive_path}` first, or give --reference truth or a trajectory file"
-            )
-            raise DiveFormatError([Problem(str(path), f"not found: {hint}")])
-    else:
-        inside = dive_path / reference
-        path = inside if inside.is_file() else Path(reference)
-        if not path.is_file():
-            raise ConfigError(
-                f"{reference}: --reference is neither truth, slam nor a trajectory file "
-                f"(looked in {dive_path} and the current folder)"
-            )
+    path = reference_file(dive_path, reference)
+    if reference in REFERENCE_FILES and not path.is_file():
+        hint = (
+            "only simulated dives have a truth"
+            if reference == "truth"
+            else f"run `auvnav slam {dive_path}` first, or give --reference truth or a trajectory file"
+        )
+        raise DiveFormatError([Problem(str(path), f"not found: {hint}")])
+    if not path.is_file():
+        raise ConfigError(
+            f"{reference}: --reference is neither truth, slam nor a trajectory file "
+            f"(looked in {dive_path} and the current folder)"
+        )
     return read_trajectory(path)
 
 
@@ -540,6 +531,7 @@ def fit_compass(
     min_depth_m: float = MIN_DEPTH_M,
     max_turn_rate_rad_s: float = math.radians(MAX_TURN_RATE_DEG_S),
     dvl_yaw_sigma_rad: float = math.radians(DVL_YAW_SIGMA_DEG),
+    transits_optional: bool = False,
 ) -> CompassFit:
     """Fit the compass correction from dives against a reference; fix its constant from transits.
 
@@ -560,6 +552,9 @@ def fit_compass(
     dvl_yaw_sigma_rad : float
         1-sigma of the DVL's yaw misalignment to the compass (:data:`DVL_YAW_SIGMA_DEG`), added
         to the transit constant's uncertainty, radians.
+    transits_optional : bool
+        With fewer than two usable legs, leave the constant arbitrary (the legs are still reported)
+        instead of raising.
 
     Returns
     -------
@@ -607,6 +602,9 @@ def fit_compass(
 
     legs = tuple(u for path in transits for u in transit_legs(load(path)))
     used = [u for u in legs if u.used]
+    if len(used) < 2 and transits_optional:
+        log.info("%d usable sub-sea legs: the constant stays arbitrary", len(used))
+        return CompassFit(fit, pairs, reference, legs=legs)
     if len(used) < 2:
         raise InsufficientDataError(
             f"--transits: {len(used)} usable sub-sea legs of {len(legs)} (need 2 or more, each at least "
@@ -632,47 +630,3 @@ def fit_compass(
         transit_residuals_rad=wrap_angle(y - transit_deviation(model, headings, weights)),
         dvl_yaw_sigma_rad=dvl_yaw_sigma_rad,
     )
-
-
-def format_fit_summary(summary: dict[str, Any]) -> str:
-    """A short human-readable account of :meth:`CompassFit.summary` (plus the files written)."""
-    p = summary["pairs"]
-    c = summary["constant"]
-    lines = []
-    if "correction" in summary:
-        lines.append(f"{summary['correction']}: compass correction ({summary['figure']})")
-    lines += [
-        f"reference {summary['reference']}: {p['used']} heading pairs of {p['candidates']} samples "
-        f"from {', '.join(summary['dives'])} ({p['surface']} at the surface, {p['turning']} turning, "
-        f"{p['outside_reference']} outside the reference)",
-        f"{summary['harmonics']} harmonics (cross-validation prefers {summary['cv_harmonics']}), "
-        f"residual RMS {summary['residual_rms_deg']:.3f} deg, {summary['n_outliers']} outliers",
-        "a0 {:.3f} deg; a {} deg; b {} deg".format(
-            summary["a0_deg"],
-            ", ".join(f"{v:.3f}" for v in summary["a_deg"]),
-            ", ".join(f"{v:.3f}" for v in summary["b_deg"]),
-        ),
-    ]
-    sigma = "" if c["sigma_deg"] is None else f" +- {c['sigma_deg']:.3f} deg"
-    if c["source"] == "gps-transits":
-        lines.append(
-            f"constant from GPS course made good: {c['legs']} legs of {', '.join(c['dives'])}{sigma} "
-            f"(with {c['dvl_yaw_sigma_deg']:.2f} deg for the DVL's yaw mounting), "
-            f"leg residual RMS {c['transit_rms_deg']:.3f} deg"
-        )
-    elif c["source"] == "truth":
-        lines.append(f"constant from the truth (simulation){sigma}")
-    else:
-        lines.append("constant arbitrary: the reference does not fix it (give --transits)")
-    for leg in summary["legs"]:
-        state = "used" if leg["used"] else f"not used: {leg['reason']}"
-        lines.append(
-            f"  leg {leg['dive']} {leg['length_m']:7.1f} m at {leg['heading_deg']:5.1f} deg: CMG - DR "
-            f"{leg['course_error_deg']:+.3f} +- {leg['course_sigma_deg']:.3f} deg ({state})"
-        )
-    for (start, end), sig in zip(summary["gaps_deg"], summary["gap_sigma_deg"], strict=True):
-        lines.append(
-            f"  no compass headings from {start:.0f} to {end:.0f} deg ({(end - start) % 360:.0f} deg wide): "
-            f"the 1-sigma band reaches {sig:.2f} deg there"
-        )
-    return "\n".join(lines)

@@ -42,18 +42,15 @@ or before when no tide is given) exceeds both :data:`RELIEF_STEP_M` and three si
 ``false_relief``: reconstructions would show a step there (the paper's Fig. 11; it quotes O(0.1 m)
 residuals after the tide correction, section III-C).
 
-Products (DESIGN section 6): ``products/depth/loop_depth.csv`` (:class:`LoopDepth`),
-``products/depth/summary.json`` (:meth:`DepthResult.summary`), ``products/depth/tide_estimated.csv``
-(a constituent file, with ``--estimate-tide``; :mod:`auvnav.depth.estimation`).
+The stage that reads a dive and writes the products is :mod:`auvnav.depth.stage`.
 """
 
 from __future__ import annotations
 
-import json
+import dataclasses
 import logging
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -64,16 +61,16 @@ from auvnav.depth.pressure import (
     DBAR_TO_PA,
     AtmosphericSeries,
     depth_from_pressure,
-    read_atmospheric,
     sea_pressure,
 )
-from auvnav.depth.tide import TideModel, read_constituents, write_constituents
-from auvnav.dive import Dive, find_stream_file, read_dive
-from auvnav.errors import DiveFormatError, InsufficientDataError, OutputExistsError, Problem
+from auvnav.depth.tide import TideModel
+from auvnav.dive import Dive
+from auvnav.errors import InsufficientDataError
 from auvnav.frames import FloatArray
 from auvnav.nav.inputs import NavInputs, nav_inputs
-from auvnav.streams import Field, Stream, atomic_write, read_stream, write_json, write_stream
-from auvnav.vision.loopfile import LoopClosures, read_loops
+from auvnav.products import DEPTH_LOOPS
+from auvnav.streams import Field, Stream
+from auvnav.vision.loopfile import LoopClosures
 
 log = logging.getLogger(__name__)
 
@@ -87,10 +84,6 @@ changed between them (issue 8 acceptance)."""
 RELIEF_STEP_M: float = 0.1
 """A residual larger than this (and than 3 sigma) on a far-apart loop is flagged as false relief: the
 O(0.1 m) the paper saw after its tide correction (section III-C)."""
-
-PRODUCTS_DIR = Path("products") / "depth"
-LOOPS_FILE = Path("products") / "vision" / "loops.csv"
-_IMAGE_TIME_TOLERANCE_S = 1e-3
 
 
 # ---------------------------------------------------------------------------------------------
@@ -286,6 +279,8 @@ class LoopDepth(Stream):
         ``dz_pressure_m - dz_visual_m``: the false depth change, the tide change plus noise.
     tide_change_m, residual_after_m : ndarray, shape (N,), metres, optional
         The tide change predicted (or estimated) between the images, and the residual less it.
+    estimated_change_m : ndarray, shape (N,), metres, optional
+        The tide change estimated from the loops (``estimate``), whichever tide was applied.
     false_relief : ndarray of bool, shape (N,)
         Far apart in time with a residual over :data:`RELIEF_STEP_M` and 3 sigma (module docstring).
     """
@@ -302,7 +297,8 @@ class LoopDepth(Stream):
     false_relief: NDArray[np.bool_]
     tide_change_m: FloatArray | None = None
     residual_after_m: FloatArray | None = None
-    FILE: ClassVar[str] = "products/depth/loop_depth"
+    estimated_change_m: FloatArray | None = None
+    FILE: ClassVar[str] = DEPTH_LOOPS.rel.removesuffix(".csv")
     TIME_ORDERED: ClassVar[bool] = False
     FIELDS: ClassVar[tuple[Field, ...]] = (
         Field("i", ("i",), kind="int"),
@@ -316,6 +312,7 @@ class LoopDepth(Stream):
         Field("residual_before_m", ("residual_before_m",)),
         Field("tide_change_m", ("tide_change_m",), required=False),
         Field("residual_after_m", ("residual_after_m",), required=False),
+        Field("estimated_change_m", ("tide_change_estimated_m",), required=False),
         Field("false_relief", ("false_relief",), kind="bool"),
     )
 
@@ -384,7 +381,7 @@ def loop_depth(
 
 
 # ---------------------------------------------------------------------------------------------
-# The stage
+# The whole check
 # ---------------------------------------------------------------------------------------------
 
 
@@ -414,8 +411,6 @@ class DepthResult:
         Where it came from: the constituent file, or ``"estimated"``.
     estimate : TideEstimate or None
         The tide estimated from the loops (``--estimate-tide``).
-    estimate_change_m : ndarray, shape (N,), or None
-        The estimated tide change over each loop.
     atmospheric : str
         What atmospheric pressure was removed.
     window_s, far_apart_s, relief_step_m : float
@@ -430,7 +425,6 @@ class DepthResult:
     tide: TideModel | None
     tide_source: str | None
     estimate: TideEstimate | None
-    estimate_change_m: FloatArray | None
     atmospheric: str
     window_s: float = WINDOW_S
     far_apart_s: float = FAR_APART_S
@@ -484,7 +478,8 @@ class DepthResult:
 
     def _estimate_summary(self, far: NDArray[np.bool_]) -> dict[str, Any]:
         est = self.estimate
-        if est is None or self.estimate_change_m is None:
+        estimated = self.loops.estimated_change_m
+        if est is None or estimated is None:
             raise ValueError("no tide estimate")
         loops = self.loops
         sigma_change = est.change_sigma_m(loops.t_i_s, loops.t_j_s)
@@ -511,34 +506,12 @@ class DepthResult:
             ],
         }
         if self.tide is not None and self.tide_source != "estimated" and loops.tide_change_m is not None:
-            out["change_rms_vs_tide_m"] = rms(self.estimate_change_m - loops.tide_change_m)
-            out["change_rms_vs_tide_far_apart_m"] = rms((self.estimate_change_m - loops.tide_change_m)[far])
+            out["change_rms_vs_tide_m"] = rms(estimated - loops.tide_change_m)
+            out["change_rms_vs_tide_far_apart_m"] = rms((estimated - loops.tide_change_m)[far])
         return out
 
 
-def _check_image_times(loops: LoopClosures, dive: Dive, display: str) -> None:
-    """Loops must give the image index's times for their poses (else they belong to another dive)."""
-    images = dive.images
-    if images is None:
-        return
-    off_s = np.maximum(np.abs(images.t_s[loops.i] - loops.t_i_s), np.abs(images.t_s[loops.j] - loops.t_j_s))
-    rows = np.flatnonzero(off_s > _IMAGE_TIME_TOLERANCE_S)
-    problems = [
-        Problem(
-            display,
-            f"times of poses {loops.i[r]} -> {loops.j[r]} differ from images/index.csv by up to "
-            f"{off_s[r]:.3f} s (a loop file of another dive?)",
-            int(r) + 1,
-        )
-        for r in rows[:5]
-    ]
-    if rows.size > 5:
-        problems.append(Problem(display, f"and {rows.size - 5} more rows whose times differ"))
-    if problems:
-        raise DiveFormatError(problems)
-
-
-def check_loops(
+def check_loop_depths(
     record: PressureDepth,
     loops: LoopClosures,
     R_ned_body_i: FloatArray,
@@ -553,7 +526,7 @@ def check_loops(
     relief_step_m: float = RELIEF_STEP_M,
     dive: str = "",
     start_time_s: float | None = None,
-    loops_file: str = str(LOOPS_FILE),
+    loops_file: str = "loops",
     atmospheric: str = "",
 ) -> DepthResult:
     """Check pressure depth against loop closures (module docstring): the stage without its files.
@@ -629,6 +602,8 @@ def check_loops(
             tide, tide_source = fit.model, "estimated"
     change = None if tide is None else tide.predict(loops.t_j_s) - tide.predict(loops.t_i_s)
     table = loop_depth(*args, tide_change_m=change, far_apart_s=far_apart_s, relief_step_m=relief_step_m)
+    if fit is not None:
+        table = dataclasses.replace(table, estimated_change_m=fit.change_m(table.t_i_s, table.t_j_s))
     return DepthResult(
         dive=dive,
         start_time_s=float(record.t_s[0]) if start_time_s is None else start_time_s,
@@ -638,7 +613,6 @@ def check_loops(
         tide=tide,
         tide_source=tide_source,
         estimate=fit,
-        estimate_change_m=None if fit is None else fit.change_m(table.t_i_s, table.t_j_s),
         atmospheric=atmospheric,
         window_s=window_s,
         far_apart_s=far_apart_s,
@@ -655,12 +629,12 @@ def check_depth(
     estimate: bool = False,
     atmospheric_pa: float | AtmosphericSeries | None = None,
     atmospheric_source: str | None = None,
-    loops_file: str = str(LOOPS_FILE),
+    loops_file: str = "loops",
     window_s: float = WINDOW_S,
     far_apart_s: float = FAR_APART_S,
     relief_step_m: float = RELIEF_STEP_M,
 ) -> DepthResult:
-    """Check a dive's pressure depth against its loop closures: :func:`check_loops` on the dive's record.
+    """Check a dive's pressure depth against its loop closures: :func:`check_loop_depths` on the dive's record.
 
     The attitude and the DVL's vertical track come from :func:`auvnav.nav.inputs.nav_inputs`.
 
@@ -670,7 +644,7 @@ def check_depth(
     loops : LoopClosures
         Indices already checked against the image index.
     tide, tide_source, estimate, loops_file, window_s, far_apart_s, relief_step_m
-        As :func:`check_loops`.
+        As :func:`check_loop_depths`.
     atmospheric_pa : float or AtmosphericSeries, optional
         Atmospheric pressure to remove, Pa; dive.yaml's constant when None.
     atmospheric_source : str, optional
@@ -684,7 +658,7 @@ def check_depth(
             if dive.info.pressure_type == "absolute"
             else "none (the sensor gives sea pressure)"
         )
-    return check_loops(
+    return check_loop_depths(
         record,
         loops,
         inputs.R_ned_body_at(loops.t_i_s),
@@ -701,186 +675,3 @@ def check_depth(
         far_apart_s=far_apart_s,
         relief_step_m=relief_step_m,
     )
-
-
-def write_depth_products(result: DepthResult, out_dir: Path) -> list[Path]:
-    """Write ``loop_depth.csv``, ``summary.json`` and (when estimated) ``tide_estimated.csv``.
-
-    Returns
-    -------
-    list of Path
-        The files written.
-    """
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    written = [out_dir / "loop_depth.csv", out_dir / "summary.json"]
-    write_stream(result.loops, written[0])
-    write_json(result.summary(), written[1])
-    estimated = out_dir / "tide_estimated.csv"
-    if result.estimate is None:
-        estimated.unlink(missing_ok=True)  # not left over from an earlier run
-    else:
-        model = result.estimate.model
-        atomic_write(estimated, lambda p: write_constituents(model, p))
-        written.append(estimated)
-    return written
-
-
-def run_depth(
-    dive_path: Path,
-    *,
-    tide_path: Path | None = None,
-    atmospheric_path: Path | None = None,
-    loops_path: Path | None = None,
-    estimate: bool = False,
-    overwrite: bool = False,
-) -> DepthResult:
-    """Read a dive and its loop closures, check its depth and write ``products/depth/``.
-
-    Parameters
-    ----------
-    dive_path : Path
-        A dive folder.
-    tide_path : Path, optional
-        A tide constituent file (:mod:`auvnav.depth.tide`), e.g. ``truth/tide.csv`` of a simulated dive.
-    atmospheric_path : Path, optional
-        An atmospheric pressure series (``t, pressure_dbar``) instead of dive.yaml's constant.
-    loops_path : Path, optional
-        The loop closures; ``products/vision/loops.csv`` (or ``.parquet``) by default.
-    estimate : bool
-        Also estimate the tide from the loops.
-    overwrite : bool
-        Replace existing depth products.
-
-    Raises
-    ------
-    OutputExistsError
-        ``products/depth/summary.json`` exists and ``overwrite`` is false.
-    InsufficientDataError
-        No loop-closure file, or no usable loop.
-    """
-    dive_path = Path(dive_path)
-    out_dir = dive_path / PRODUCTS_DIR
-    if (out_dir / "summary.json").exists() and not overwrite:
-        raise OutputExistsError(f"{out_dir}: depth products exist (use --overwrite to replace them)")
-    dive = read_dive(dive_path)
-    if loops_path is None:
-        loops_path = find_stream_file(dive_path, str(LOOPS_FILE.with_suffix("")))
-        if loops_path is None:
-            raise InsufficientDataError(
-                f"{dive_path / LOOPS_FILE}: no loop closures (run 'auvnav loops' or give --loops FILE)"
-            )
-    n_poses = None if dive.images is None else len(dive.images)
-    loops = read_loops(Path(loops_path), n_poses=n_poses)
-    _check_image_times(loops, dive, str(loops_path))
-    latitude_rad = dive.info.origin.latitude_rad
-    tide = None if tide_path is None else read_constituents(Path(tide_path), latitude_rad=latitude_rad)
-    atmospheric = None if atmospheric_path is None else read_atmospheric(Path(atmospheric_path))
-    if atmospheric is not None and dive.info.pressure_type == "sea":
-        log.warning("%s: the dive's pressure is sea pressure; %s is not used", dive_path, atmospheric_path)
-        atmospheric, atmospheric_path = None, None
-    result = check_depth(
-        dive,
-        loops,
-        loops_file=str(loops_path),
-        tide=tide,
-        tide_source=None if tide_path is None else str(tide_path),
-        atmospheric_pa=atmospheric,
-        atmospheric_source=None if atmospheric_path is None else str(atmospheric_path),
-        estimate=estimate,
-    )
-    write_depth_products(result, out_dir)
-    return result
-
-
-def format_summary(summary: dict[str, Any]) -> str:
-    """A short human-readable account of :meth:`DepthResult.summary`."""
-
-    def cm(value: float | None) -> str:
-        return "-" if value is None else f"{100 * value:.1f} cm"
-
-    tide = summary["tide"]
-    lines = [
-        f"dive '{summary['dive']}': {summary['n_loops']} loop closures from {summary['loops_file']}"
-        + (f" ({summary['n_dropped']} left out: no pressure or DVL there)" if summary["n_dropped"] else ""),
-        f"tide correction: {'none' if tide is None else tide['source']}; "
-        f"atmospheric pressure: {summary['atmospheric']}",
-        f"{'residual RMS':26s} {'n':>6s} {'before':>10s} {'after':>10s}",
-    ]
-    for label, key in (("all loops", None), ("far apart (> {:.0f} min)", "far_apart"), ("near", "near")):
-        s = summary if key is None else summary[key]
-        n = summary["n_loops"] if key is None else s["n"]
-        lines.append(
-            f"  {label.format(summary['far_apart_s'] / 60):24s} {n:6d} "
-            f"{cm(s['residual_rms_before_m']):>10s} {cm(s['residual_rms_after_m']):>10s}"
-        )
-    lines.append(f"median 1-sigma of a residual: {cm(summary['sigma_median_m'])}")
-    after = summary["false_relief_after"]
-    lines.append(
-        f"false-relief steps (far apart, > {cm(summary['relief_step_m'])} and 3 sigma): "
-        f"{summary['false_relief_before']} before correction" + ("" if after is None else f", {after} after")
-    )
-    est = summary["estimated_tide"]
-    if est is not None:
-        lines.append(
-            f"tide estimated from {est['n_used']} loops over {est['record_h']:.2f} h "
-            f"({est['n_outliers']} outliers): fit RMS {cm(est['rms_fit_m'])}, "
-            f"tide change known to {cm(est['change_sigma_rms_m'])} RMS (1 sigma)"
-        )
-        for c in est["constituents"]:
-            kind = (
-                "resolved"
-                if c["resolved"]
-                else f"effective (resolving needs {c['resolving_record_h']:.0f} h)"
-            )
-            lines.append(
-                f"  {c['name']:3s} {c['amplitude_m']:.3f} +- {c['amplitude_sigma_m']:.3f} m, "
-                f"phase {c['phase_deg']:.1f} +- {c['phase_sigma_deg']:.1f} deg, {kind}"
-            )
-        if "change_rms_vs_tide_m" in est:
-            lines.append(
-                f"  estimated minus given tide change: {cm(est['change_rms_vs_tide_m'])} RMS, "
-                f"{cm(est['change_rms_vs_tide_far_apart_m'])} on far-apart loops"
-            )
-    return "\n".join(lines)
-
-
-def depth_section(dive_path: Path) -> dict[str, Any] | None:
-    """The ``depth`` section of ``auvnav evaluate`` (DESIGN section 7), or None without depth products.
-
-    ``residual_rms_before_m`` and ``residual_rms_after_m`` over all loops, as ``summary.json`` has them
-    (``after`` is None when no tide was applied), and the same for the far-apart loops. With the
-    simulator's ``truth/tide.csv``: ``residual_rms_true_tide_m``, the residual once the true tide
-    change is removed (what pressure and vision leave), and with an estimated tide
-    ``estimated_tide_change_rmse_m`` and ``estimated_tide_change_rmse_far_apart_m``, its tide change
-    against the truth's over the loops.
-    """
-    dive_path = Path(dive_path)
-    out_dir = dive_path / PRODUCTS_DIR
-    summary_file = out_dir / "summary.json"
-    if not summary_file.is_file():
-        return None
-    summary = json.loads(summary_file.read_text(encoding="utf-8"))
-    section: dict[str, Any] = {
-        "residual_rms_before_m": summary["residual_rms_before_m"],
-        "residual_rms_after_m": summary["residual_rms_after_m"],
-        "far_apart_residual_rms_before_m": summary["far_apart"]["residual_rms_before_m"],
-        "far_apart_residual_rms_after_m": summary["far_apart"]["residual_rms_after_m"],
-    }
-    truth_file = dive_path / "truth" / "tide.csv"
-    if not truth_file.is_file():
-        return section
-    dive = read_dive(dive_path)
-    latitude_rad = dive.info.origin.latitude_rad
-    truth = read_constituents(truth_file, latitude_rad=latitude_rad)
-    loops = read_stream(LoopDepth, out_dir / "loop_depth.csv")
-    far = loops.dt_s > summary["far_apart_s"]
-    true_change = truth.predict(loops.t_j_s) - truth.predict(loops.t_i_s)
-    section["residual_rms_true_tide_m"] = rms(loops.residual_before_m - true_change)
-    estimated_file = out_dir / "tide_estimated.csv"
-    if summary["estimated_tide"] is not None and estimated_file.is_file():
-        estimated = read_constituents(estimated_file, latitude_rad=latitude_rad)
-        error = estimated.predict(loops.t_j_s) - estimated.predict(loops.t_i_s) - true_change
-        section["estimated_tide_change_rmse_m"] = rms(error)
-        section["estimated_tide_change_rmse_far_apart_m"] = rms(error[far])
-    return section

@@ -1,13 +1,12 @@
-"""Depth validation figure: the analogue of the paper's Fig. 6 (matplotlib lives in ``report/`` only).
-
-:func:`depth_products` runs the depth stage and draws the figure: the one call of ``auvnav depth``
-and of ``auvnav demo``.
+"""Depth validation figure: the analogue of the paper's Fig. 6 (matplotlib lives in ``report/`` only),
+drawn from the depth stage's products.
 """
 
 from __future__ import annotations
 
+import json
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import matplotlib
 
@@ -15,13 +14,36 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from auvnav.depth.validation import PRODUCTS_DIR, DepthResult, rms, run_depth
-from auvnav.streams import atomic_write
+from auvnav import products as P
+from auvnav.depth.validation import LoopDepth, rms
+from auvnav.dive import read_dive_info
+from auvnav.streams import atomic_write, read_stream
 
-FIGURE = "fig_depth.png"
+
+@dataclass(frozen=True)
+class DepthFigure:
+    """What the Fig. 6 plot shows: the depth stage's per-loop table and what its summary says."""
+
+    dive: str
+    start_time_s: float
+    loops: LoopDepth
+    tide_source: str | None
+    relief_step_m: float
+
+    @classmethod
+    def from_products(cls, dive: Path) -> DepthFigure:
+        summary = json.loads(P.DEPTH_SUMMARY.path(dive).read_text(encoding="utf-8"))
+        tide = summary["tide"]
+        return cls(
+            dive=summary["dive"],
+            start_time_s=read_dive_info(dive).start_time_s,
+            loops=read_stream(LoopDepth, P.DEPTH_LOOPS.path(dive)),
+            tide_source=None if tide is None else tide["source"],
+            relief_step_m=summary["relief_step_m"],
+        )
 
 
-def plot_depth(result: DepthResult, path: Path, *, dpi: int = 120) -> Path:
+def plot_depth(result: DepthFigure, path: Path, *, dpi: int = 120) -> Path:
     """Loop-closure vertical residuals against the time of the second image, with the tide change.
 
     Top: the pressure-depth change minus the visual vertical change of each loop closure (the paper's
@@ -32,7 +54,7 @@ def plot_depth(result: DepthResult, path: Path, *, dpi: int = 120) -> Path:
 
     Parameters
     ----------
-    result : DepthResult
+    result : DepthFigure
     path : Path
         PNG file to write.
     dpi : int
@@ -59,10 +81,10 @@ def plot_depth(result: DepthResult, path: Path, *, dpi: int = 120) -> Path:
     if loops.tide_change_m is not None:
         label = "tide change (estimated)" if result.tide_source == "estimated" else "tide change (predicted)"
         top.scatter(hours, loops.tide_change_m, s=4, c="k", label=label)
-    if result.estimate_change_m is not None and result.tide_source != "estimated":
+    if loops.estimated_change_m is not None and result.tide_source != "estimated":
         top.scatter(
             hours,
-            result.estimate_change_m,
+            loops.estimated_change_m,
             s=10,
             c="0.5",
             marker="x",
@@ -106,35 +128,3 @@ def plot_depth(result: DepthResult, path: Path, *, dpi: int = 120) -> Path:
     atomic_write(Path(path), lambda p: fig.savefig(p, dpi=dpi, format="png"))
     plt.close(fig)
     return Path(path)
-
-
-def depth_products(
-    dive_path: Path,
-    *,
-    tide_path: Path | None = None,
-    atmospheric_path: Path | None = None,
-    loops_path: Path | None = None,
-    estimate: bool = False,
-    overwrite: bool = False,
-) -> dict[str, Any]:
-    """The depth stage with its figure, as ``auvnav depth`` and ``auvnav demo`` run it.
-
-    :func:`auvnav.depth.validation.run_depth` (``products/depth/loop_depth.csv``, ``summary.json``,
-    ``tide_estimated.csv``) then :func:`plot_depth` (``products/depth/fig_depth.png``); the arguments
-    are :func:`~auvnav.depth.validation.run_depth`'s.
-
-    Returns
-    -------
-    dict
-        The stage's summary (:meth:`DepthResult.summary`).
-    """
-    result = run_depth(
-        dive_path,
-        tide_path=tide_path,
-        atmospheric_path=atmospheric_path,
-        loops_path=loops_path,
-        estimate=estimate,
-        overwrite=overwrite,
-    )
-    plot_depth(result, Path(dive_path) / PRODUCTS_DIR / FIGURE)
-    return result.summary()

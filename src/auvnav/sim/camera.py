@@ -25,15 +25,15 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from auvnav.dive import ImageIndex
+from auvnav.executor import Executor, SerialExecutor, chunks
+from auvnav.footprint import SeafloorLike
 from auvnav.frames import se3, se3_inverse
-from auvnav.parallel import process_pool
 from auvnav.sim.texture import SeafloorTexture
 from auvnav.streams import write_stream
 from auvnav.trajectory import Trajectory
@@ -62,12 +62,6 @@ ATTENUATION_PER_M = 0.3
 COARSE_GRID_COLUMNS = 48
 
 R_BODY_CAM = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
-
-
-class SeafloorLike(Protocol):
-    """Anything with a vectorised seafloor depth (positive down, metres, local NED)."""
-
-    def depth_m(self, north_m: FloatArray, east_m: FloatArray) -> FloatArray: ...
 
 
 def default_stereo_rig() -> StereoRig:
@@ -355,6 +349,12 @@ class _RenderJob:
     out_dir: Path
 
 
+def _render_chunk(job: _RenderJob, items: list[tuple[int, FloatArray]]) -> list[int]:
+    for k, T_ned_body in items:
+        _render_one(job, k, T_ned_body)
+    return [k for k, _ in items]
+
+
 def _render_one(job: _RenderJob, k: int, T_ned_body: FloatArray) -> None:
     rng = np.random.default_rng([job.seed, k])
     left, right = render_stereo_pair(
@@ -383,7 +383,7 @@ def render_images(
     texture: SeafloorTexture | None = None,
     lighting: Lighting | None = None,
     seed: int = 0,
-    workers: int | None = None,
+    executor: Executor | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> ImageIndex:
     """Render stereo pairs at ``times_s`` along the true trajectory and write ``images/``.
@@ -403,8 +403,8 @@ def render_images(
         Seeded with ``seed`` when omitted.
     seed : int
         Seeds the texture (when not given) and the sensor noise of every image.
-    workers : int, optional
-        Processes (default: all cores); 1 renders in this process.
+    executor : Executor, optional
+        Runs the rendering (default: in this process).
     progress : callable(done, total), optional
 
     Returns
@@ -421,18 +421,11 @@ def render_images(
         seafloor, texture or SeafloorTexture(seed=seed), rig, lighting or Lighting(), seed, out_dir
     )
     total = len(times_s)
-    if workers == 1 or total < 4:
-        for k in range(total):
-            _render_one(job, k, poses[k])
-            if progress:
-                progress(k + 1, total)
-    else:
-        with process_pool(workers) as pool:
-            futures = [pool.submit(_render_one, job, k, poses[k]) for k in range(total)]
-            for done, fut in enumerate(futures, 1):
-                fut.result()
-                if progress:
-                    progress(done, total)
+    done = 0
+    for rendered in (executor or SerialExecutor()).map(_render_chunk, job, chunks(list(enumerate(poses)), 2)):
+        done += len(rendered)
+        if progress:
+            progress(done, total)
     names = [image_names(k) for k in range(total)]
     index = ImageIndex(
         times_s, np.array([a for a, _ in names], dtype=str), np.array([b for _, b in names], dtype=str)
@@ -468,7 +461,7 @@ def render_dive_images(
     rate_hz: float = 1.0,
     rig: StereoRig | None = None,
     seed: int = 0,
-    workers: int | None = None,
+    executor: Executor | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> ImageIndex:
     """Render the images of a simulated dive folder and record their calibration.
@@ -489,14 +482,13 @@ def render_dive_images(
         Default :func:`default_stereo_rig`.
     seed : int
         Texture and sensor noise.
-    workers : int, optional
-        Processes (default all cores).
+    executor : Executor, optional
+        Runs the rendering (default: in this process).
     progress : callable(done, total), optional
     """
     import dataclasses
 
-    import yaml
-
+    from auvnav.dive import vehicle_file_name
     from auvnav.trajectory import read_trajectory
     from auvnav.vehicle import read_vehicle, write_vehicle
 
@@ -506,9 +498,8 @@ def render_dive_images(
     rig = scale_camera_rig(rig or default_stereo_rig(), scale)
     times = select_image_times(truth, seafloor, rate_hz=rate_hz)
     index = render_images(
-        truth, seafloor, rig, times, dive_path / "images", seed=seed, workers=workers, progress=progress
+        truth, seafloor, rig, times, dive_path / "images", seed=seed, executor=executor, progress=progress
     )
-    dive_yaml = yaml.safe_load((dive_path / "dive.yaml").read_text(encoding="utf-8"))
-    vehicle_file = dive_path / str(dive_yaml.get("vehicle", "vehicle.yaml"))
+    vehicle_file = dive_path / (vehicle_file_name(dive_path) or "vehicle.yaml")
     write_vehicle(dataclasses.replace(read_vehicle(vehicle_file), stereo=rig), vehicle_file)
     return index

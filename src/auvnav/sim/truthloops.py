@@ -2,18 +2,19 @@
 
 ``auvnav simulate ... --truth-loops [--false-loops F]`` writes, beside the dive's truth:
 
-- ``truth/image_times.csv`` (column ``t``, POSIX seconds): the stereo pairs' trigger times. They are
-  the rendered images' times when ``images/index.csv`` exists, else the times the renderer would
-  use (:func:`auvnav.sim.camera.select_image_times`: 1 Hz while the vehicle is within imaging
-  altitude). Row ``k`` (0-based) is pose ``k`` of the loop file and of the SLAM graph.
+- ``images/index.csv``, when the images are not rendered: the camera's trigger log, the times and
+  the file names the renderer would use (:func:`auvnav.sim.camera.select_image_times`: 1 Hz while the
+  vehicle is within imaging altitude), as a vehicle whose images were not downloaded has it. Row
+  ``k`` (0-based) is pose ``k`` of the loop file and of the SLAM graph.
 - ``truth/loops.csv``: loop closures in the one loop-file format (:mod:`auvnav.vision.loopfile`:
   ``T_i_j = inv(T_ned_body_i) @ T_ned_body_j``, covariance of (x, y, z, roll, pitch, yaw)), ``i``
-  and ``j`` rows of ``image_times.csv``.
+  and ``j`` rows of ``images/index.csv``.
 - ``truth/loops.yaml``: how they were made (noise, threshold, seed) and which rows are false.
 
 **Which pairs.** Each pair's footprint is the left camera's image rectangle (pinhole, corners of the
-image) projected on the horizontal plane at the seafloor's depth below the camera. Two pairs whose
-footprints overlap by at least ``min_overlap`` of the smaller one (convex polygon clipping) become a
+image) projected on the horizontal plane at the seafloor's depth below the camera
+(:mod:`auvnav.footprint`). Two pairs whose footprints overlap by at least ``min_overlap`` of the
+smaller one (convex polygon clipping) become a
 loop closure, consecutive pairs included (the visual odometry a vision front end measures). The
 default, 20%, is the vision front end's candidate threshold (:class:`auvnav.vision.candidates.
 CandidateSettings`): the default rig sees 1.3 m across track from 1.7 m above the floor, so the lines
@@ -44,29 +45,28 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 import yaml
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from auvnav.dive import ImageIndex
+from auvnav.dive import ImageIndex, vehicle_file_name
 from auvnav.errors import ConfigError
+from auvnav.footprint import SeafloorLike, footprints, overlapping_pairs
 from auvnav.frames import FloatArray, euler2rot, se3, se3_inverse
 from auvnav.sim.camera import (
-    SeafloorLike,
     body_poses,
     default_stereo_rig,
+    image_names,
     seafloor_from_truth,
     select_image_times,
 )
-from auvnav.streams import atomic_write, read_stream, write_table
+from auvnav.streams import atomic_write, read_stream, write_stream
 from auvnav.trajectory import Trajectory, read_trajectory
 from auvnav.vehicle import StereoRig, read_vehicle
 from auvnav.vision.loopfile import LoopClosures, loops_from_transforms, write_loops
 
 log = logging.getLogger(__name__)
 
-IMAGE_TIMES_FILE = Path("truth") / "image_times.csv"
 LOOPS_FILE = Path("truth") / "loops.csv"
 LOOPS_INFO_FILE = Path("truth") / "loops.yaml"
 
@@ -116,116 +116,6 @@ class TruthLoops:
                 f"is_false and overlap must have shape ({n},); found {np.shape(self.is_false)} "
                 f"and {np.shape(self.overlap)}"
             )
-
-
-def footprints(T_ned_body: FloatArray, rig: StereoRig, seafloor: SeafloorLike) -> FloatArray:
-    """The left camera's image rectangle on the seafloor, as north-east polygons.
-
-    Parameters
-    ----------
-    T_ned_body : ndarray, shape (P, 4, 4)
-        Body poses, metres, local NED.
-    rig : StereoRig
-        The stereo rig (its left camera and mount).
-    seafloor : object with ``depth_m(north_m, east_m)``
-
-    Returns
-    -------
-    ndarray, shape (P, 4, 2)
-        Corners (north, east), metres, in image order (top-left, top-right, bottom-right, bottom-left):
-        the corner rays (pinhole, distortion ignored) meet the horizontal plane at the seafloor's
-        depth below the camera.
-    """
-    cam = rig.left
-    u = np.array([0.0, cam.width, cam.width, 0.0])
-    v = np.array([0.0, 0.0, cam.height, cam.height])
-    rays_cam = np.linalg.solve(cam.K, np.stack([u, v, np.ones(4)]))  # (3, 4)
-    R_ned_cam = T_ned_body[:, :3, :3] @ rig.mount.R_body_sensor
-    c_ned = T_ned_body[:, :3, 3] + T_ned_body[:, :3, :3] @ rig.mount.lever_arm_body_m
-    rays = R_ned_cam @ rays_cam  # (P, 3, 4)
-    floor = np.asarray(seafloor.depth_m(c_ned[:, 0], c_ned[:, 1]), dtype=float)
-    height = floor - c_ned[:, 2]
-    down = np.maximum(rays[:, 2, :], 1e-6)  # a ray at or above the horizon: far away
-    s = (height[:, None] / down)[:, None, :]
-    return np.swapaxes(c_ned[:, :2, None] + s * rays[:, :2, :], 1, 2)
-
-
-def _clip(subject: list[tuple[float, float]], a: tuple[float, float], b: tuple[float, float]) -> list:
-    """The part of a polygon on the left of the directed edge a -> b (one Sutherland-Hodgman step)."""
-
-    def side(p: tuple[float, float]) -> float:
-        return (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
-
-    out = []
-    for k, p in enumerate(subject):
-        q = subject[k - 1]
-        sp, sq = side(p), side(q)
-        if sp >= 0.0:
-            if sq < 0.0:
-                out.append(_cross(q, p, sq, sp))
-            out.append(p)
-        elif sq >= 0.0:
-            out.append(_cross(q, p, sq, sp))
-    return out
-
-
-def _cross(q: tuple[float, float], p: tuple[float, float], sq: float, sp: float) -> tuple[float, float]:
-    w = sq / (sq - sp)
-    return (q[0] + w * (p[0] - q[0]), q[1] + w * (p[1] - q[1]))
-
-
-def _area(poly: list[tuple[float, float]]) -> float:
-    """Signed area (shoelace), positive counter-clockwise in (x, y)."""
-    return 0.5 * sum(poly[k - 1][0] * p[1] - p[0] * poly[k - 1][1] for k, p in enumerate(poly))
-
-
-def polygon_overlap(a: FloatArray, b: FloatArray) -> float:
-    """Overlap of two convex polygons (K, 2), either orientation: intersection over the smaller area."""
-    pa = [tuple(map(float, p)) for p in a]
-    pb = [tuple(map(float, p)) for p in b]
-    if _area(pa) < 0:
-        pa.reverse()
-    if _area(pb) < 0:
-        pb.reverse()
-    inter = pa
-    for k in range(len(pb)):
-        inter = _clip(inter, pb[k - 1], pb[k])
-        if not inter:
-            return 0.0
-    smaller = min(_area(pa), _area(pb))
-    return _area(inter) / smaller if smaller > 0 else 0.0
-
-
-def overlapping_pairs(polygons: FloatArray) -> tuple[NDArray[np.int64], FloatArray]:
-    """Pairs (i < j) of overlapping footprints, with their overlap (:func:`polygon_overlap`).
-
-    Parameters
-    ----------
-    polygons : ndarray, shape (P, K, 2)
-        Convex footprints.
-
-    Returns
-    -------
-    pairs : ndarray of int64, shape (M, 2)
-        Sorted by i, then j.
-    overlap : ndarray, shape (M,)
-        In (0, 1].
-    """
-    if len(polygons) < 2:
-        return np.zeros((0, 2), dtype=np.int64), np.zeros(0)
-    centre = polygons.mean(axis=1)
-    radius = np.max(np.linalg.norm(polygons - centre[:, None, :], axis=2), axis=1)
-    tree = cKDTree(centre)
-    candidates = tree.query_pairs(2.0 * float(radius.max()), output_type="ndarray")
-    if len(candidates) == 0:
-        return np.zeros((0, 2), dtype=np.int64), np.zeros(0)
-    i, j = candidates[:, 0], candidates[:, 1]
-    near = np.linalg.norm(centre[i] - centre[j], axis=1) < radius[i] + radius[j]
-    candidates = np.sort(candidates[near], axis=1)
-    overlap = np.array([polygon_overlap(polygons[a], polygons[b]) for a, b in candidates])
-    keep = overlap > 0.0
-    order = np.lexsort((candidates[keep, 1], candidates[keep, 0]))
-    return candidates[keep][order].astype(np.int64), overlap[keep][order]
 
 
 def _limit_per_image(
@@ -420,13 +310,15 @@ def write_truth_loops(
     truth = read_trajectory(dive_path / "truth" / "trajectory.csv")
     seafloor = seafloor_from_truth(dive_path / "truth" / "truth.yaml")
     index = dive_path / "images" / "index.csv"
-    if index.is_file():
+    rendered = index.is_file()
+    if rendered:
         times = read_stream(ImageIndex, index, str(index)).t_s
     else:
         times = select_image_times(truth, seafloor, rate_hz=rate_hz)
-        atomic_write(dive_path / IMAGE_TIMES_FILE, lambda p: write_table(pd.DataFrame({"t": times}), p))
-    vehicle_yaml = yaml.safe_load((dive_path / "dive.yaml").read_text(encoding="utf-8")).get("vehicle")
-    rig = read_vehicle(dive_path / str(vehicle_yaml or "vehicle.yaml")).stereo
+        names = [image_names(k) for k in range(len(times))]
+        log_ = ImageIndex(times, np.array([a for a, _ in names]), np.array([b for _, b in names]))
+        write_stream(log_, index)
+    rig = read_vehicle(dive_path / (vehicle_file_name(dive_path) or "vehicle.yaml")).stereo
     result = truth_loops(
         truth, seafloor, times, rig=rig, false_fraction=false_fraction, seed=seed, **settings
     )
@@ -434,7 +326,7 @@ def write_truth_loops(
     write_loops(result.loops, loops_path)
     info = {
         "format": "auvnav-truth-loops/1",
-        "image_times": "images/index.csv" if index.is_file() else str(IMAGE_TIMES_FILE),
+        "image_times": "images/index.csv" + ("" if rendered else " (trigger log; images not rendered)"),
         "seed": seed,
         "min_overlap": settings.get("min_overlap", MIN_OVERLAP),
         "max_per_image": settings.get("max_per_image", MAX_PER_IMAGE),

@@ -4,32 +4,11 @@
 - :mod:`auvnav.slam.solve`: chi-square cost, batch Levenberg-Marquardt, incremental iSAM2, robust
   loop closures, marginal covariances.
 - :mod:`auvnav.slam.synthetic`: survey pose graphs with a known truth, for tests and benchmarks.
-- :mod:`auvnav.slam.graph`: a dive's sensor graph (DVL, attitude, depth, compass, fixes, loop
-  closures), solved in batch or with iSAM2; :mod:`auvnav.slam.compass`: its heading factor and the
-  deviation estimated inside it; :mod:`auvnav.slam.products`: the ``auvnav slam`` stage.
+- :mod:`auvnav.slam.poses`, :mod:`auvnav.slam.graph`, :mod:`auvnav.slam.optimize`: a dive's
+  sensor graph (its poses; DVL, attitude, depth, compass, fixes and loop-closure factors), solved
+  in batch or with iSAM2, with marginals; :mod:`auvnav.slam.compass`: its heading factor and the
+  deviation estimated inside it; :mod:`auvnav.slam.result`: all of it for one dive;
+  :mod:`auvnav.slam.stage`: the ``auvnav slam`` stage.
+
+Import from the modules; the package itself imports nothing, so that its parts load only when used.
 """
-
-from auvnav.slam.g2o import PoseGraph, PoseGraphFormatError, read_g2o, write_g2o
-from auvnav.slam.solve import (
-    PoseGraphSolveError,
-    SolveResult,
-    chi2_cost,
-    marginal_covariances,
-    optimize_batch,
-    optimize_incremental,
-    to_gtsam,
-)
-
-__all__ = [
-    "PoseGraph",
-    "PoseGraphFormatError",
-    "PoseGraphSolveError",
-    "SolveResult",
-    "chi2_cost",
-    "marginal_covariances",
-    "optimize_batch",
-    "optimize_incremental",
-    "read_g2o",
-    "to_gtsam",
-    "write_g2o",
-]

@@ -5,6 +5,7 @@
 - :mod:`~auvnav.vision.stereo`: stereo matching along epipolar lines, the per-pair feature cache;
 - :mod:`~auvnav.vision.candidates`: footprints, overlap probability, the navigation drift model;
 - :mod:`~auvnav.vision.registration`: RANSAC, weighted and robust 3-D registration, covariance;
-- :mod:`~auvnav.vision.loops`: the ``auvnav loops`` stage; :mod:`~auvnav.vision.loopfile`: ``loops.csv``;
+- :mod:`~auvnav.vision.loops`: loop closures of a dive; :mod:`~auvnav.vision.loopfile`: ``loops.csv``;
+- :mod:`~auvnav.vision.stage`: the ``auvnav loops`` stage and its products in ``products/vision/``;
 - :mod:`~auvnav.vision.evaluate`: loop closures against a simulated dive's truth.
 """

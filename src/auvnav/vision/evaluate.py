@@ -32,6 +32,7 @@ from scipy.stats import chi2
 
 from auvnav.dive import ImageIndex, read_dive
 from auvnav.frames import angle_diff, rot2euler, se3, se3_inverse
+from auvnav.products import LOOPS, VISION_SUMMARY
 from auvnav.trajectory import Trajectory
 from auvnav.vehicle import StereoRig
 from auvnav.vision.camera import T_body_cam, pixel_rays
@@ -201,7 +202,7 @@ def score_loops(
 def loops_section(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, Any] | None:
     """``auvnav evaluate``'s ``loops`` section, or None when ``products/vision/loops.csv`` is absent."""
     dive_path = Path(dive_path)
-    path = dive_path / "products" / "vision" / "loops.csv"
+    path = LOOPS.path(dive_path)
     if not path.is_file():
         return None
     dive = read_dive(dive_path)
@@ -209,7 +210,7 @@ def loops_section(dive_path: Path, truth: Trajectory, distance_m: float) -> dict
         log.warning("%s: the dive has no images or no stereo calibration; loops not scored", dive_path)
         return None
     loops = read_loops(path, n_poses=len(dive.images))
-    summary_path = path.with_name("summary.json")
+    summary_path = VISION_SUMMARY.path(dive_path)
     tested = None
     if summary_path.is_file():
         tested = json.loads(summary_path.read_text(encoding="utf-8")).get("candidates_tested")

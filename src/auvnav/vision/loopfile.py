@@ -19,9 +19,10 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from auvnav.errors import DiveFormatError, Problem
+from auvnav.errors import DiveFormatError
 from auvnav.frames import euler2rot, rot2euler, se3
-from auvnav.streams import Field, Stream, read_stream, write_stream
+from auvnav.products import LOOPS
+from auvnav.streams import Field, Stream, flag_rows, read_stream, write_stream
 
 DEG = np.pi / 180.0
 _UPPER = [(a, b) for a in range(6) for b in range(a, 6)]
@@ -108,28 +109,50 @@ def loops_from_transforms(
 
 
 def check_loops(loops: LoopClosures, n_poses: int, display: str) -> None:
-    """Raise :class:`DiveFormatError` naming every row whose poses do not exist or whose covariance is
-    not positive definite (rows are 1-based data rows)."""
-    problems: list[Problem] = []
-    for row in np.flatnonzero((loops.i < 0) | (loops.i >= n_poses) | (loops.j < 0) | (loops.j >= n_poses)):
-        problems.append(
-            Problem(
-                display,
-                f"names pose {loops.i[row]} -> {loops.j[row]}; poses are 0..{n_poses - 1}",
-                int(row) + 1,
-            )
-        )
-    for row in np.flatnonzero(loops.i == loops.j):
-        problems.append(Problem(display, f"joins pose {loops.i[row]} to itself", int(row) + 1))
-    eig_min = np.linalg.eigvalsh(loops.covariance)[:, 0]
-    for row in np.flatnonzero(~(eig_min > 0)):
-        problems.append(
-            Problem(
-                display,
-                f"covariance is not positive definite (smallest eigenvalue {eig_min[row]:.3g})",
-                int(row) + 1,
-            )
-        )
+    """Raise :class:`DiveFormatError` naming the rows whose poses do not exist, that join a pose to
+    itself, or whose covariance is not positive definite (1-based data rows; a few of each kind, then
+    a count)."""
+    outside = (loops.i < 0) | (loops.i >= n_poses) | (loops.j < 0) | (loops.j >= n_poses)
+    eig_min = np.linalg.eigvalsh(loops.covariance)[:, 0] if len(loops) else np.zeros(0)
+    problems = flag_rows(
+        outside,
+        display,
+        None,
+        lambda r: f"names pose {loops.i[r - 1]} -> {loops.j[r - 1]}; poses are 0..{n_poses - 1}",
+        "rows naming poses that do not exist",
+    )
+    problems += flag_rows(
+        loops.i == loops.j, display, None, lambda r: f"joins pose {loops.i[r - 1]} to itself", "self-loops"
+    )
+    problems += flag_rows(
+        ~(eig_min > 0),
+        display,
+        None,
+        lambda r: f"covariance is not positive definite (smallest eigenvalue {eig_min[r - 1]:.3g})",
+        "covariances that are not positive definite",
+    )
+    if problems:
+        raise DiveFormatError(problems)
+
+
+#: Loop-file times may differ from the image times by this much, seconds.
+LOOP_TIME_TOLERANCE_S = 1e-3
+
+
+def check_loop_times(loops: LoopClosures, image_t_s: NDArray[np.float64], display: str) -> None:
+    """Raise :class:`DiveFormatError` naming the rows whose times are not the image times of their
+    poses (a loop file of another dive); ``image_t_s`` may hold NaN for images to leave unchecked."""
+    off = np.fmax(np.abs(image_t_s[loops.i] - loops.t_i_s), np.abs(image_t_s[loops.j] - loops.t_j_s))
+    problems = flag_rows(
+        off > LOOP_TIME_TOLERANCE_S,
+        display,
+        None,
+        lambda r: (
+            f"times of poses {loops.i[r - 1]} -> {loops.j[r - 1]} differ from the image times by "
+            f"{off[r - 1]:.3f} s (a loop file of another dive?)"
+        ),
+        "rows whose times differ",
+    )
     if problems:
         raise DiveFormatError(problems)
 
@@ -144,6 +167,15 @@ def read_loops(path: Path, *, n_poses: int | None = None) -> LoopClosures:
     if n_poses is not None:
         check_loops(loops, n_poses, str(path))
     return loops
+
+
+def loops_file(dive: Path, given: Path | None = None) -> Path | None:
+    """The loop closures a stage reads: the file given, else the loop-closure stage's
+    (``products/vision/loops.csv``) when it exists."""
+    if given is not None:
+        return Path(given)
+    path = LOOPS.path(dive)
+    return path if path.is_file() else None
 
 
 def write_loops(loops: LoopClosures, path: Path) -> None:

@@ -1,12 +1,16 @@
-"""The loop-closure stage: features of every stereo pair, candidates, verification, ``loops.csv``.
+"""Loop closures of a dive: features of every stereo pair, candidates, verification.
 
-:func:`find_loops` runs, with every core (a process pool) and an optional progress callback:
+:func:`find_loops` runs, with an executor (:mod:`auvnav.executor`) and an optional progress callback:
 
-1. stereo features of every pair (:mod:`auvnav.vision.stereo`), cached in ``products/vision/features/``;
-   a missing or unreadable image skips its pair with a warning naming it;
+1. stereo features of every pair (:mod:`auvnav.vision.stereo`), cached in ``features/`` of the
+   stage's cache (``products/cache/vision/``); a missing or unreadable image skips its pair with a
+   warning naming it;
 2. rounds of verification: the consecutive pairs and the candidates the prior makes probable
    (:mod:`auvnav.vision.candidates`); each verified non-consecutive loop refines the drift model, so
-   the next round searches where the corrected prior now points, until no new candidate appears;
+   the next round searches where the corrected prior now points, until no new candidate appears.
+   Each chunk of verified pairs is cached (``verify/``), keyed by the two feature files, the prior
+   pose and uncertainty, the registration's settings and the vocabulary, so a run killed in the
+   middle loses at most the chunks in flight;
 3. a verification (:func:`~auvnav.vision.registration.register`) is accepted when the registration
    is, and when it agrees with the prior: the horizontal displacement within the gate of the corrected
    prior's uncertainty, the relative heading within ``max_heading_disagreement_rad`` of the compass's.
@@ -26,11 +30,12 @@ The file is written and read by :mod:`auvnav.vision.loopfile`.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
+import os
 import time
-from collections.abc import Callable, Iterable
-from concurrent.futures import Executor
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
@@ -40,12 +45,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
+from auvnav import products as P
 from auvnav.dive import Dive, ImageIndex
 from auvnav.errors import ConfigError, InsufficientDataError
+from auvnav.executor import Executor, SerialExecutor, chunks
 from auvnav.frames import angle_diff, euler2rot, rot2euler, se3, se3_inverse, wrap_angle
-from auvnav.parallel import process_pool
-from auvnav.streams import write_json
-from auvnav.trajectory import Trajectory, read_trajectory
+from auvnav.streams import atomic_write
+from auvnav.trajectory import Trajectory
 from auvnav.vehicle import StereoRig
 from auvnav.vision.camera import Rectification, T_body_cam, rectification
 from auvnav.vision.candidates import (
@@ -56,7 +62,7 @@ from auvnav.vision.candidates import (
     footprints,
 )
 from auvnav.vision.features import FeatureSettings, Vocabulary, build_vocabulary
-from auvnav.vision.loopfile import LoopClosures, loops_from_transforms, write_loops
+from auvnav.vision.loopfile import LoopClosures, loops_from_transforms
 from auvnav.vision.registration import RegistrationSettings, expm_so3, register
 from auvnav.vision.stereo import cache_path, pair_features, read_features
 
@@ -173,6 +179,7 @@ class _Context:
     rect: Rectification
     settings: LoopSettings
     cache_dir: Path
+    verify_dir: Path
     vocabulary: Vocabulary | None = None
 
 
@@ -193,13 +200,31 @@ def _features_task(ctx: _Context, items: list[tuple[int, str, str]]) -> list[tup
 
 _load = lru_cache(maxsize=512)(read_features)  # each worker's recently used feature files
 
+#: One verified pair in the verification cache (``products/cache/vision/verify/``): its key, then
+#: the registration's outcome (before the prior's check, which depends on the round).
+_VERIFY_RECORD = np.dtype(
+    [
+        ("key", "S20"),
+        ("accepted", "?"),
+        ("reason", "S96"),
+        ("pose6", "<f8", (6,)),
+        ("cov6", "<f8", (21,)),
+        ("matches", "<i8"),
+        ("inliers", "<i8"),
+        ("residual", "<f8"),
+    ]
+)
+_UPPER = np.triu_indices(6)
 
-def _verify_task(
-    ctx: _Context, items: list[tuple[int, int, str, str, FloatArray, float]]
-) -> list[Verification]:
+WorkItem = tuple[int, int, str, str, FloatArray, float, bytes]
+
+
+def _verify_task(ctx: _Context, items: list[WorkItem]) -> list[Verification]:
+    """Register each pair; the chunk's outcomes go to the verification cache as one file."""
     T_bc = T_body_cam(ctx.rig)
     out = []
-    for i, j, pi, pj, T_prior, sigma in items:
+    records = np.zeros(len(items), dtype=_VERIFY_RECORD)
+    for n, (i, j, pi, pj, T_prior, sigma, key) in enumerate(items):
         reg = register(
             _load(pi), _load(pj), ctx.settings.registration, prior=(T_prior, sigma), vocabulary=ctx.vocabulary
         )
@@ -207,12 +232,62 @@ def _verify_task(
             p6, c6 = body_pose_and_covariance(reg.T_a_b, reg.cov_xi, T_bc)
         else:
             p6, c6 = np.full(6, np.nan), np.full((6, 6), np.nan)
-        out.append(
-            Verification(
-                i, j, reg.accepted, reg.reason, p6, c6, reg.matches, reg.inliers, reg.normalised_residual
-            )
+        v = Verification(
+            i, j, reg.accepted, reg.reason, p6, c6, reg.matches, reg.inliers, reg.normalised_residual
         )
+        out.append(v)
+        records[n] = (
+            key,
+            v.accepted,
+            v.reason.encode(),
+            p6,
+            c6[_UPPER],
+            v.matches,
+            v.inliers,
+            v.normalised_residual,
+        )
+    name = hashlib.sha1(b"".join(item[-1] for item in items)).hexdigest()
+    path = ctx.verify_dir / f"{name}.npy"
+
+    def write(p: Path) -> None:
+        with open(p, "wb") as fh:
+            np.save(fh, records)
+
+    atomic_write(path, write)
     return out
+
+
+def _read_verified(verify_dir: Path) -> dict[bytes, np.void]:
+    """Every cached verification, by key (unreadable files are ignored: they are redone)."""
+    out: dict[bytes, np.void] = {}
+    if not verify_dir.is_dir():
+        return out
+    for path in sorted(verify_dir.glob("*.npy")):
+        try:
+            records = np.load(path)
+        except (OSError, ValueError):
+            log.warning("%s: unreadable verification cache file ignored", path)
+            continue
+        if records.dtype == _VERIFY_RECORD:
+            out.update((bytes(r["key"]), r) for r in records)
+    return out
+
+
+def _from_cache(i: int, j: int, r: np.void) -> Verification:
+    cov = np.zeros((6, 6))
+    cov[_UPPER] = r["cov6"]
+    cov = cov + np.triu(cov, 1).T
+    return Verification(
+        i,
+        j,
+        bool(r["accepted"]),
+        r["reason"].decode(),
+        np.array(r["pose6"]),
+        cov,
+        int(r["matches"]),
+        int(r["inliers"]),
+        float(r["residual"]),
+    )
 
 
 def _vocabulary(files: list[str], words: int, sample: int = 20_000) -> Vocabulary | None:
@@ -229,13 +304,8 @@ def _vocabulary(files: list[str], words: int, sample: int = 20_000) -> Vocabular
     return build_vocabulary(data, words) if len(data) >= 20 * words else None
 
 
-def _chunks(items: list, size: int) -> Iterable[list]:
-    for k in range(0, len(items), size):
-        yield items[k : k + size]
-
-
-def _run(
-    pool: Executor | None,
+def _map(
+    executor: Executor,
     fn: Callable[[_Context, list], list],
     ctx: _Context,
     items: list,
@@ -245,17 +315,13 @@ def _run(
     done0: int = 0,
     total: int | None = None,
 ) -> list:
+    """``fn`` over ``items`` in chunks through the executor, with progress; results in order."""
     total = len(items) if total is None else total
     results: list = []
     done = done0
-    chunks = list(_chunks(items, chunk))
-    if pool is None:
-        outputs: Iterable[list] = (fn(ctx, c) for c in chunks)
-    else:
-        outputs = (f.result() for f in [pool.submit(fn, ctx, c) for c in chunks])
-    for c, out in zip(chunks, outputs, strict=True):
+    for out in executor.map(fn, ctx, chunks(items, chunk)):
         results.extend(out)
-        done += len(c)
+        done += len(out)
         if progress:
             progress(stage, done, total)
     return results
@@ -272,17 +338,6 @@ def image_altitude(dive: Dive, t_s: FloatArray) -> FloatArray:
     if ok.sum() < 2:
         raise InsufficientDataError("nav/dvl: fewer than two valid altitudes; cannot place image footprints")
     return np.interp(t_s, dive.dvl.t_s[ok], dive.dvl.altitude_m[ok])
-
-
-def read_prior(dive_path: Path) -> Trajectory:
-    """The navigation prior: ``products/nav/filter.csv``, else ``products/nav/dr.csv``."""
-    for name in ("filter.csv", "dr.csv"):
-        path = Path(dive_path) / "products" / "nav" / name
-        if path.is_file():
-            return read_trajectory(path)
-    raise InsufficientDataError(
-        f"{Path(dive_path) / 'products' / 'nav'}: no navigation (filter.csv or dr.csv); run `auvnav navigate` first"
-    )
 
 
 @lru_cache(maxsize=4)
@@ -315,7 +370,7 @@ def find_loops(
     *,
     settings: LoopSettings | None = None,
     cache_dir: Path | None = None,
-    workers: int | None = None,
+    executor: Executor | None = None,
     progress: Progress | None = None,
 ) -> LoopResult:
     """Loop closures of a dive with images.
@@ -328,9 +383,11 @@ def find_loops(
         Navigation covering the image times (``products/nav/filter.csv`` or ``dr.csv``).
     settings : LoopSettings, optional
     cache_dir : Path, optional
-        Feature cache (default ``DIVE/products/vision/features``).
-    workers : int, optional
-        Processes; None: every core; 1: in this process.
+        The stage's cache: features in ``features/``, verified pairs in ``verify/`` (default
+        ``DIVE/products/cache/vision``). Both are reused by content: a rerun, or a run resumed after
+        a kill, does again only what no file holds.
+    executor : Executor, optional
+        Runs the per-pair work (default: in this process).
     progress : callable(stage, done, total), optional
         Stages ``"features"`` and ``"verify"`` (its total grows as rounds add candidates).
 
@@ -339,6 +396,7 @@ def find_loops(
     LoopResult
     """
     settings = settings or LoopSettings()
+    executor = executor or SerialExecutor()
     if dive.images is None or len(dive.images) == 0:
         raise InsufficientDataError("images/index.csv: the dive has no images")
     if dive.vehicle.stereo is None:
@@ -358,80 +416,63 @@ def find_loops(
         raise InsufficientDataError(
             "images/index.csv: fewer than two images inside the navigation's time span"
         )
-    cache_dir = Path(cache_dir) if cache_dir is not None else dive.path / "products" / "vision" / "features"
-    ctx = _Context(dive.path / "images", rig, rectification(rig), settings, cache_dir)
+    cache_dir = Path(cache_dir) if cache_dir is not None else P.cache_dir(dive.path, "vision")
+    verify_dir = cache_dir / "verify"
+    ctx = _Context(
+        dive.path / "images", rig, rectification(rig), settings, cache_dir / "features", verify_dir
+    )
     started = time.perf_counter()
-    pool = None if workers == 1 else process_pool(workers)
-    try:
-        items = [(int(k), str(images.left[k]), str(images.right[k])) for k in index]
-        feats = _run(pool, _features_task, ctx, items, 4, "features", progress)
-        t_features = time.perf_counter() - started
-        files = {k: f for k, f, _ in feats if f is not None}
-        n_features = {k: n for k, f, n in feats if f is not None}
-        usable = np.array(sorted(files), dtype=np.intp)
-        if len(usable) < 2:
-            raise InsufficientDataError("images: fewer than two readable stereo pairs")
-        if settings.vocabulary_words > 1:
-            ctx = replace(ctx, vocabulary=_vocabulary([files[k] for k in usable], settings.vocabulary_words))
-        pri = prior.interpolate(t[usable])
-        fp_u = footprints(pri, image_altitude(dive, t[usable]), rig)
-        speed = float(
-            np.median(np.linalg.norm(np.diff(pri.p_ned_m[:, :2], axis=0), axis=1) / np.diff(pri.t_s))
-        )
-        drift = DriftModel(pri.t_s, speed, settings.candidates)
-        # Work in positions within `usable` (u) and map back to image rows at the end.
-        tested: dict[tuple[int, int], Verification] = {}
-        consecutive = [(a, a + 1) for a in range(len(usable) - 1)]
-        todo = consecutive
-        rounds = 0
-        done = 0
-        total = 0
-        while todo and rounds < settings.max_rounds:
-            rounds += 1
-            total += len(todo)
-            work = _work_items(todo, usable, files, pri, drift, fp_u, T_body_cam(rig))
-            results = _run(pool, _verify_task, ctx, work, 16, "verify", progress, done, total)
-            done += len(work)
-            centre = fp_u.centre_ne_m + drift.correction(fp_u.t_s)
-            for v in results:
-                if v.accepted and v.j - v.i > 1:
-                    sigma = float(drift.relative_sigma(fp_u.t_s[[v.i]], fp_u.t_s[[v.j]])[0])
-                    reason = _prior_check(v, fp_u, centre, sigma, settings)
-                    if reason:
-                        v = Verification(
-                            v.i,
-                            v.j,
-                            False,
-                            reason,
-                            v.pose6,
-                            v.cov6,
-                            v.matches,
-                            v.inliers,
-                            v.normalised_residual,
-                        )
-                tested[(v.i, v.j)] = v
-            _refit(drift, fp_u, tested)
-            ci, cj, _ = candidate_pairs(fp_u, drift, settings.candidates, exclude=set(tested))
-            # Verified in image order: a worker's chunk then shares feature files (its cache).
-            todo = sorted(_limit_per_image(ci, cj, settings.per_image_per_round))
-        if todo:
-            log.warning("stopped after %d rounds with %d candidates untested", rounds, len(todo))
-    finally:
-        if pool is not None:
-            pool.shutdown()
+    items = [(int(k), str(images.left[k]), str(images.right[k])) for k in index]
+    feats = _map(executor, _features_task, ctx, items, 4, "features", progress)
+    t_features = time.perf_counter() - started
+    files = {k: f for k, f, _ in feats if f is not None}
+    n_features = {k: n for k, f, n in feats if f is not None}
+    usable = np.array(sorted(files), dtype=np.intp)
+    if len(usable) < 2:
+        raise InsufficientDataError("images: fewer than two readable stereo pairs")
+    if settings.vocabulary_words > 1:
+        ctx = replace(ctx, vocabulary=_vocabulary([files[k] for k in usable], settings.vocabulary_words))
+    verified = _read_verified(verify_dir)
+    salt = _verification_salt(settings, ctx.vocabulary)
+    pri = prior.interpolate(t[usable])
+    fp_u = footprints(pri, image_altitude(dive, t[usable]), rig)
+    speed = float(np.median(np.linalg.norm(np.diff(pri.p_ned_m[:, :2], axis=0), axis=1) / np.diff(pri.t_s)))
+    drift = DriftModel(pri.t_s, speed, settings.candidates)
+    # Work in positions within `usable` (u) and map back to image rows at the end.
+    tested: dict[tuple[int, int], Verification] = {}
+    consecutive = [(a, a + 1) for a in range(len(usable) - 1)]
+    todo = consecutive
+    rounds = 0
+    done = 0
+    total = 0
+    reused = 0
+    while todo and rounds < settings.max_rounds:
+        rounds += 1
+        total += len(todo)
+        work = _work_items(todo, usable, files, pri, drift, fp_u, T_body_cam(rig), salt)
+        cached = [_from_cache(w[0], w[1], verified[w[-1]]) for w in work if w[-1] in verified]
+        fresh = [w for w in work if w[-1] not in verified]
+        reused += len(cached)
+        done += len(cached)
+        results = cached + _map(executor, _verify_task, ctx, fresh, 16, "verify", progress, done, total)
+        done += len(fresh)
+        centre = fp_u.centre_ne_m + drift.correction(fp_u.t_s)
+        for v in sorted(results, key=lambda v: (v.i, v.j)):
+            if v.accepted and v.j - v.i > 1:
+                sigma = float(drift.relative_sigma(fp_u.t_s[[v.i]], fp_u.t_s[[v.j]])[0])
+                reason = _prior_check(v, fp_u, centre, sigma, settings)
+                if reason:
+                    v = replace(v, accepted=False, reason=reason)
+            tested[(v.i, v.j)] = v
+        _refit(drift, fp_u, tested)
+        ci, cj, _ = candidate_pairs(fp_u, drift, settings.candidates, exclude=set(tested))
+        # Verified in image order: a worker's chunk then shares feature files (its cache).
+        todo = sorted(_limit_per_image(ci, cj, settings.per_image_per_round))
+    if todo:
+        log.warning("stopped after %d rounds with %d candidates untested", rounds, len(todo))
     # Back to image rows.
     out = [
-        Verification(
-            int(usable[v.i]),
-            int(usable[v.j]),
-            v.accepted,
-            v.reason,
-            v.pose6,
-            v.cov6,
-            v.matches,
-            v.inliers,
-            v.normalised_residual,
-        )
+        replace(v, i=int(usable[v.i]), j=int(usable[v.j]))
         for v in sorted(tested.values(), key=lambda v: (v.i, v.j))
     ]
     loops = loop_closures([v for v in out if v.accepted], t)
@@ -452,12 +493,24 @@ def find_loops(
         "nonconsecutive_accepted": int(sum(v.accepted and v.j - v.i > 1 for v in out)),
         "rejected": reasons,
         "rounds": rounds,
+        "verifications_reused": reused,
+        "executor": executor.name,
+        "workers": executor.workers,
         "features_s": t_features,
         "elapsed_s": elapsed,
         "pairs_per_s": len(usable) / elapsed if elapsed > 0 else float("nan"),
         "settings": json.loads(json.dumps(asdict(settings), default=float)),
     }
     return LoopResult(loops, out, summary)
+
+
+def _verification_salt(settings: LoopSettings, vocabulary: Vocabulary | None) -> bytes:
+    """What every verification depends on besides its pair and prior: the registration's settings and
+    the vocabulary (learnt from the dive's features)."""
+    h = hashlib.sha1(f"verify/1:{asdict(settings.registration)}".encode())
+    if vocabulary is not None:
+        h.update(np.ascontiguousarray(vocabulary.centres).tobytes())
+    return h.digest()
 
 
 def _work_items(
@@ -468,10 +521,11 @@ def _work_items(
     drift: DriftModel,
     fp: Footprints,
     T_bc: FloatArray,
-) -> list[tuple[int, int, str, str, FloatArray, float]]:
+    salt: bytes,
+) -> list[WorkItem]:
     """Verification work: pairs with their feature files, the corrected prior's camera pose of j in i,
-    and its lateral uncertainty (the drift model's, plus a compass heading error of 0.1 rad turning the
-    displacement)."""
+    its lateral uncertainty (the drift model's, plus a compass heading error of 0.1 rad turning the
+    displacement), and the key of the outcome in the verification cache."""
     a = np.array([p[0] for p in pairs], dtype=np.intp)
     b = np.array([p[1] for p in pairs], dtype=np.intp)
     p_ned = prior.p_ned_m.copy()
@@ -480,10 +534,20 @@ def _work_items(
     T_ab = se3_inverse(T[a]) @ T[b]
     sigma = drift.relative_sigma(fp.t_s[a], fp.t_s[b])
     sigma = np.hypot(sigma, 0.1 * np.linalg.norm(T_ab[:, :2, 3], axis=1))
-    return [
-        (int(i), int(j), files[int(usable[i])], files[int(usable[j])], T_ab[k], float(sigma[k]))
-        for k, (i, j) in enumerate(zip(a, b, strict=True))
-    ]
+    out = []
+    for k, (i, j) in enumerate(zip(a, b, strict=True)):
+        fi, fj = files[int(usable[i])], files[int(usable[j])]
+        key = hashlib.sha1(
+            salt
+            + os.path.basename(fi).encode()
+            + b"|"
+            + os.path.basename(fj).encode()
+            + b"|"
+            + T_ab[k].tobytes()
+            + float(sigma[k]).hex().encode()
+        ).digest()
+        out.append((int(i), int(j), fi, fj, T_ab[k], float(sigma[k]), key))
+    return out
 
 
 def _limit_per_image(i: NDArray[np.intp], j: NDArray[np.intp], cap: int) -> list[tuple[int, int]]:
@@ -525,49 +589,3 @@ def loop_closures(accepted: list[Verification], t_s: FloatArray) -> LoopClosures
     T = se3(euler2rot(p6[:, 5], p6[:, 4], p6[:, 3]), p6[:, :3])
     inliers = np.array([v.inliers for v in accepted], dtype=np.int64)
     return loops_from_transforms(i, j, t_s[i], t_s[j], T, cov, inliers)
-
-
-def write_loop_products(result: LoopResult, out_dir: Path) -> list[Path]:
-    """Write ``loops.csv`` and ``summary.json`` into ``out_dir`` (``DIVE/products/vision``)."""
-    out_dir = Path(out_dir)
-    loops_path = out_dir / "loops.csv"
-    write_loops(result.loops, loops_path)
-    summary_path = out_dir / "summary.json"
-    write_json(result.summary, summary_path)
-    return [loops_path, summary_path]
-
-
-def run_loop_stage(
-    dive_path: Path,
-    *,
-    settings: LoopSettings | None = None,
-    workers: int | None = None,
-    progress: Progress | None = None,
-) -> dict[str, Any]:
-    """``auvnav loops``: read the dive and its navigation, find loops, write ``products/vision/``.
-
-    Returns the summary (also ``products/vision/summary.json``) with the files written.
-    """
-    from auvnav.dive import read_dive
-
-    dive_path = Path(dive_path)
-    dive = read_dive(dive_path)
-    result = find_loops(dive, read_prior(dive_path), settings=settings, workers=workers, progress=progress)
-    files = write_loop_products(result, dive_path / "products" / "vision")
-    return {**result.summary, "files": [str(f) for f in files]}
-
-
-def format_loop_summary(summary: dict[str, Any]) -> str:
-    """The human summary of :func:`run_loop_stage`."""
-    lines = [
-        f"{summary['pairs_with_features']} stereo pairs ({summary['pairs_skipped']} skipped), "
-        f"median {summary['features_median']:.0f} triangulated features",
-        f"{summary['candidates_tested']} pairs tested ({summary['consecutive_tested']} consecutive) in "
-        f"{summary['rounds']} rounds: {summary['loops_accepted']} accepted, "
-        f"{summary['nonconsecutive_accepted']} of them loop closures",
-    ]
-    for reason, n in sorted(summary["rejected"].items(), key=lambda kv: -kv[1]):
-        lines.append(f"  rejected: {reason}: {n}")
-    lines.append(f"{summary['elapsed_s']:.0f} s, {summary['pairs_per_s']:.1f} stereo pairs/s")
-    lines += [f"wrote {f}" for f in summary["files"]]
-    return "\n".join(lines)

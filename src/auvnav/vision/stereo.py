@@ -15,7 +15,7 @@ Each match is triangulated with a first-order covariance from the keypoint noise
 (:func:`~auvnav.vision.camera.triangulate`): the left keypoint's detection noise is common to both
 images, the tracker's (measured from the rows of the matches, :func:`split_noise`) independent.
 
-Results are cached per stereo pair in ``products/vision/features/``, one ``.npy`` file of records (one
+Results are cached per stereo pair in ``products/cache/vision/features/``, one ``.npy`` file of records (one
 read, a quarter of a zip archive's time: the verification reads them again and again), whose name
 carries the left image's name and a hash of everything that determines them (both image files' size and
 modification time, the calibration, the settings), so reruns do no work twice. Pixel positions and

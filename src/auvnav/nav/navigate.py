@@ -1,40 +1,25 @@
-"""The navigation stage: dead reckoning, filter and smoother, course made good, and their products.
+"""Navigating a dive: dead reckoning, filter and smoother, course made good, in one result.
 
-Products (DESIGN section 6), in ``DIVE/products/nav/``:
-
-- ``dr.csv`` and ``dr.tum``: the dead-reckoned track;
-- ``filter.csv`` and ``filter.tum``: the smoothed filter track with 1-sigma position and heading;
-- ``innovations.csv``: every position fix's innovation in the forward filter (``t, sensor,
-  innovation_north_m, innovation_east_m, sigma_north_m, sigma_east_m, cov_north_east_m2,
-  mahalanobis, accepted, reset``; sigma = square root of the innovation covariance's diagonal, so
-  the paper's Fig. 9 bounds are +-2 sigma);
-- ``cmg.csv``: course made good on the sub-sea legs between GPS fixes (:mod:`auvnav.nav.cmg`);
-- ``summary.json``: what :meth:`NavResult.summary` gives.
-
-The stage is rerunnable: a rerun replaces these files (each written atomically) and nothing else.
+:func:`navigate` runs the navigation of one :class:`~auvnav.dive.Dive`; :class:`NavResult` carries
+what it found and its machine-readable summary. The stage that writes the products is
+:mod:`auvnav.nav.stage`.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
-from auvnav.compass.correction import read_correction
 from auvnav.depth.pressure import depth_from_pressure
-from auvnav.dive import Dive, read_dive
+from auvnav.dive import Dive
 from auvnav.nav.cmg import TransitLeg, course_made_good
 from auvnav.nav.deadreckon import Start, dead_reckon, start_position
 from auvnav.nav.filter import FilterConfig, FilterResult, run_filter
 from auvnav.nav.inputs import HeadingCorrection, NavInputs, nav_inputs
-from auvnav.streams import write_json, write_table
-from auvnav.trajectory import Trajectory, write_trajectory, write_tum
-
-PRODUCTS_DIR = Path("products") / "nav"
+from auvnav.trajectory import Trajectory
 
 
 @dataclass(frozen=True)
@@ -177,107 +162,3 @@ def navigate(
         legs=course_made_good(dive, dr),
         compass_correction=correction_name,
     )
-
-
-def legs_frame(legs: list[TransitLeg]) -> pd.DataFrame:
-    """Course made good as a table in file units (``cmg.csv``)."""
-    deg = math.degrees
-    columns = [
-        "t_start",
-        "t_end",
-        "duration_s",
-        "length_m",
-        "dr_length_m",
-        "cmg_deg",
-        "dr_course_deg",
-        "course_error_deg",
-        "course_sigma_deg",
-        "mean_compass_heading_deg",
-        "compass_heading_spread_deg",
-    ]
-    rows = [
-        [
-            leg.t_start_s,
-            leg.t_end_s,
-            leg.duration_s,
-            leg.length_m,
-            leg.dr_length_m,
-            deg(leg.cmg_rad),
-            deg(leg.dr_course_rad),
-            deg(leg.course_error_rad),
-            deg(leg.course_sigma_rad),
-            deg(leg.mean_compass_heading_rad),
-            deg(leg.compass_heading_spread_rad),
-        ]
-        for leg in legs
-    ]
-    return pd.DataFrame(rows, columns=columns)
-
-
-def write_products(result: NavResult, out_dir: Path) -> list[Path]:
-    """Write the stage's products into ``out_dir`` (normally ``DIVE/products/nav``), replacing them.
-
-    Returns
-    -------
-    list of Path
-        The files written.
-    """
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    written = []
-    for stem, traj in (("dr", result.dr), ("filter", result.filter.smoothed)):
-        write_trajectory(traj, out_dir / f"{stem}.csv")
-        write_tum(traj, out_dir / f"{stem}.tum")
-        written += [out_dir / f"{stem}.csv", out_dir / f"{stem}.tum"]
-    write_table(result.filter.innovations.to_frame(), out_dir / "innovations.csv")
-    write_table(legs_frame(result.legs), out_dir / "cmg.csv")
-    write_json(result.summary(), out_dir / "summary.json")
-    written += [out_dir / "innovations.csv", out_dir / "cmg.csv", out_dir / "summary.json"]
-    return written
-
-
-def run_navigation(dive_path: Path, *, compass_correction: Path | None = None) -> dict[str, Any]:
-    """Read a dive folder, navigate it and write ``products/nav/``; the summary (for ``auvnav demo``).
-
-    Parameters
-    ----------
-    dive_path : Path
-        A dive folder.
-    compass_correction : Path, optional
-        A compass correction file (``auvnav-compass-correction/1``).
-    """
-    dive = read_dive(Path(dive_path))
-    correction = None if compass_correction is None else read_correction(Path(compass_correction))
-    result = navigate(
-        dive,
-        correction=correction,
-        correction_name=None if compass_correction is None else str(compass_correction),
-    )
-    write_products(result, Path(dive_path) / PRODUCTS_DIR)
-    return result.summary()
-
-
-def format_summary(summary: dict[str, Any]) -> str:
-    """A short human-readable account of :meth:`NavResult.summary`."""
-    drop = summary["dvl_dropouts"]
-    correction = summary["compass_correction"] or "none"
-    lines = [
-        f"dive '{summary['dive']}': {summary['duration_s'] / 3600:.2f} h, {summary['samples']} samples, "
-        f"dead-reckoned distance {summary['dr_distance_m']:.1f} m",
-        f"declination {summary['declination_deg']:.2f} deg ({summary['declination_source']}), "
-        f"compass correction {correction}, track starts from {summary['start']['source']}",
-        f"DVL dropouts bridged: {drop['count']}, {drop['total_s']:.1f} s in all, longest {drop['longest_s']:.1f} s",
-    ]
-    if summary["fixes"]:
-        lines.append(f"{'fixes':8s} {'n':>6s} {'used':>6s} {'rejected':>9s} {'resets':>7s}")
-        for sensor, n in summary["fixes"].items():
-            lines.append(f"  {sensor:6s} {n['n']:6d} {n['accepted']:6d} {n['rejected']:9d} {n['resets']:7d}")
-        lines.append(f"innovations inside 2 sigma: {100 * summary['innovations_inside_2sigma']:.1f}%")
-    end = summary["end_fix"]
-    if end is not None:
-        lines.append(
-            f"last fix ({end['sensor']}): dead reckoning off by {end['dr_error_m']:.2f} m, filter innovation "
-            f"{end['filter_innovation_m']:.2f} m (sigma {end['filter_innovation_sigma_m']:.2f} m)"
-        )
-    lines.append(f"sub-sea legs with course made good: {summary['legs']}")
-    return "\n".join(lines)
