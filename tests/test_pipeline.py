@@ -18,7 +18,7 @@ import pytest
 from auvnav.cli import main
 from auvnav.pipeline import STAGES, process
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("pipeline")]  # one worker builds the dives
 
 # A check dive small enough for a test: 2 arms of 6 m and a 2 m grid, quarter-size images (174 pairs).
 SIMULATE = ["simulate", "navcheck", "--seed", "2", "--headings", "2", "--leg-m", "6", "--grid-m", "2"]
@@ -137,7 +137,7 @@ def _wait_for_worker_start(dive: Path, proc: subprocess.Popen, timeout_s: float 
     deadline = time.monotonic() + timeout_s
     features = dive / "products" / "cache" / "vision" / "features"
     while time.monotonic() < deadline and proc.poll() is None:
-        if features.is_dir() and len(list(features.glob("*.npy"))) >= 10:
+        if features.is_dir() and len(list(features.glob("*.feat"))) >= 10:
             return
         time.sleep(0.05)
     raise AssertionError("the loop stage did not start")

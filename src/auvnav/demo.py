@@ -4,9 +4,10 @@ The campaign mirrors the Scott Reef cruise of the paper (section IV): a navigati
 reciprocal legs plus a grid, section III-A), long sub-sea transits between GPS fixes (for the compass
 correction's constant, Fig. 5b), and the 75 m x 50 m full-coverage survey (section IV-A) flown three
 ways: with the vehicle's compass as it is, with the deviation removed (the best the DVL allows), and with
-the correction fitted from the check dive. Every stage that exists runs on it and its figures are
-measured against the simulator's truth; the summary says which stages do not exist yet rather than
-pretending they ran.
+the correction fitted from the check dive. Each dive is simulated, then processed as a user's dive would
+be (:func:`auvnav.pipeline.process`), then the compass correction is fitted across dives (the shape on
+the check dive, the constant on the transits); every figure is measured against the simulator's truth,
+and the summary says which stages do not exist yet rather than pretending they ran.
 """
 
 from __future__ import annotations

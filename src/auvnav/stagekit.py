@@ -142,22 +142,22 @@ def field_types(cls: type) -> dict[str, Any]:
 
 def _coerce(name: str, tp: Any, value: Any, meta: Mapping[str, Any], base: Path | None) -> Any:
     """``value`` as the field's type (from YAML or a ``--set`` string), checked; else ConfigError."""
-    base, optional = _unwrap_optional(tp)
+    kind, optional = _unwrap_optional(tp)
     if value is None:
         if optional:
             return None
         raise ConfigError(f"{name}: must be given (found null)")
-    origin = typing.get_origin(base)
+    origin = typing.get_origin(kind)
     if origin is Literal:
-        choices = typing.get_args(base)
+        choices = typing.get_args(kind)
         if value not in choices:
             raise ConfigError(f"{name}: expected one of {', '.join(map(str, choices))}; found {quote(value)}")
         return value
     if origin is tuple:
-        (inner,) = (a for a in typing.get_args(base) if a is not Ellipsis)
+        (inner,) = (a for a in typing.get_args(kind) if a is not Ellipsis)
         items = value if isinstance(value, (list, tuple)) else [value]
         return tuple(_coerce(name, inner, v, meta, base) for v in items)
-    if base is bool:
+    if kind is bool:
         if isinstance(value, bool):
             return value
         text = str(value).strip().lower()
@@ -166,28 +166,28 @@ def _coerce(name: str, tp: Any, value: Any, meta: Mapping[str, Any], base: Path 
         if text in ("false", "no", "off", "0"):
             return False
         raise ConfigError(f"{name}: expected true or false; found {quote(value)}")
-    if base in (int, float):
+    if kind in (int, float):
         if isinstance(value, bool):
             raise ConfigError(f"{name}: expected a number; found {quote(value)}")
         try:
-            number = base(value) if base is float or isinstance(value, int) else int(str(value))
+            number = kind(value) if kind is float or isinstance(value, int) else int(str(value))
         except (TypeError, ValueError):
             raise ConfigError(
-                f"{name}: expected {'an integer' if base is int else 'a number'}; found {quote(value)}"
+                f"{name}: expected {'an integer' if kind is int else 'a number'}; found {quote(value)}"
             ) from None
         if number != number or number in (float("inf"), float("-inf")):
             raise ConfigError(f"{name}: must be finite; found {quote(value)}")
         lo, hi = meta.get("minimum"), meta.get("maximum")
         if (lo is not None and number < lo) or (hi is not None and number > hi):
-            bounds = f"[{'-inf' if lo is None else lo:g}, {'inf' if hi is None else hi:g}]"
+            bounds = f"[{'-inf' if lo is None else f'{lo:g}'}, {'inf' if hi is None else f'{hi:g}'}]"
             raise ConfigError(f"{name}: must be in {bounds}; found {number:g}")
         return number
-    if base is Path:
+    if kind is Path:
         if not isinstance(value, (str, Path)) or not str(value):
             raise ConfigError(f"{name}: expected a file path; found {quote(value)}")
         path = Path(value)
         return base / path if base is not None and not path.is_absolute() else path
-    if base is str:
+    if kind is str:
         if not isinstance(value, str):
             raise ConfigError(f"{name}: expected text; found {quote(value)}")
         return value

@@ -1,16 +1,25 @@
-"""Front end: SIFT keypoints where their features are, stereo matches at the right disparity."""
+"""Front end: SIFT keypoints where their features are, stereo matches at the right disparity,
+descriptors companded to 4 bits."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
 from auvnav.frames import euler2rot, se3
 from auvnav.sim.camera import camera_poses, default_stereo_rig, render_stereo_pair, scale_camera_rig
 from auvnav.sim.texture import SeafloorTexture
 from auvnav.vision.camera import rectification
-from auvnav.vision.features import FeatureSettings, correct_illumination, detect
+from auvnav.vision.features import (
+    SIFT_COMPONENT_MAX,
+    FeatureSettings,
+    compand_descriptors,
+    correct_illumination,
+    detect,
+)
 from auvnav.vision.stereo import stereo_features
 
 # A location bias b shows as 2 b between the keypoints of an image and of the image turned by 180 degrees
@@ -51,3 +60,12 @@ def test_stereo_matches_lie_on_the_floor(flat_floor, image_scale: float) -> None
     assert len(feats) > 0.8 * settings.max_features
     range_m = flat_floor.base_m - camera_poses(rig, T)[0][2, 3]
     assert np.median(feats.p_cam_m[:, 2]) == pytest.approx(range_m, rel=0.002)
+
+
+@given(st.lists(st.integers(0, 255), min_size=2, max_size=128))
+def test_companding_is_monotonic_and_spans_4_bits(values: list[int]) -> None:
+    d = np.array(sorted(values), dtype=np.uint8)[None, :]
+    q = compand_descriptors(d)[0]
+    assert q.dtype == np.uint8 and q.min() >= 0 and q.max() <= 15
+    assert np.all(np.diff(q.astype(int)) >= 0)
+    assert compand_descriptors(np.array([[0, int(SIFT_COMPONENT_MAX)]], dtype=np.uint8)).tolist() == [[0, 15]]

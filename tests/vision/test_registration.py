@@ -53,8 +53,8 @@ def _point_sets(rng: np.random.Generator, T_a_b: np.ndarray, n: int, outliers: i
     p_a[:outliers] += rng.uniform(-0.3, 0.3, (outliers, 3))
     desc = _descriptors(rng, n)
     return (
-        StereoFeatures(np.zeros((n, 2)), p_a, Sa, desc),
-        StereoFeatures(np.zeros((n, 2)), p_b, Sb, desc.copy()),
+        StereoFeatures(np.zeros((n, 4)), p_a, Sa, desc),
+        StereoFeatures(np.zeros((n, 4)), p_b, Sb, desc.copy()),
     )
 
 

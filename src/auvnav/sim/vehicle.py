@@ -23,8 +23,13 @@ heading autopilot turns the onboard heading onto that course, and the vehicle sl
 A compass deviation therefore bends the true track while the onboard track stays on the plan: the
 paper's 'accordion' and 'figure 8' (Fig. 2) emerge from the loop.
 
-Everything steps at ``dt_s`` (0.1 s) in plain ``math`` for speed; the result is a
-:class:`LoopRecord` of arrays that :mod:`auvnav.sim.run` turns into a dive folder.
+Everything steps at ``dt_s`` (0.1 s) in plain ``math`` for speed. One step of :func:`fly`: the true
+vehicle's attitude (``_TrueVehicle``); the sensors measure the true vehicle (``_Instruments``); the
+onboard navigation takes their measurements (``_Onboard``); guidance moves through the mission's
+segments and commands speed, yaw rate and vertical rate from the onboard state alone
+(``_Guidance``); the onboard position is dead reckoned and the true vehicle integrated to the next
+step. The result is a :class:`LoopRecord` of arrays that :mod:`auvnav.sim.run` turns into a dive
+folder.
 """
 
 from __future__ import annotations
@@ -32,14 +37,14 @@ from __future__ import annotations
 import itertools
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from auvnav.frames import FloatArray
-from auvnav.plan.missions import Ascend, Descend, Line, Mission, Spin, Surface
+from auvnav.plan.missions import Ascend, Descend, Line, Mission, Segment, Spin, Surface
 from auvnav.sim.seafloor import Seafloor
 from auvnav.sim.sensors import (
     SensorModels,
@@ -55,7 +60,9 @@ log = logging.getLogger(__name__)
 DEG = math.pi / 180.0
 TWO_PI = 2.0 * math.pi
 _NOISE_BLOCK = 8192  # rows of standard normal draws per refill
-_NOISE_COLUMNS = 13  # mag xyz, tilt pitch/roll, attitude process pitch/roll, DVL vxyz, altitude, GPS ne
+#: Columns of a step's draws: 0-2 magnetometer xyz, 3-4 inclinometer pitch and roll, 5-6 attitude
+#: process pitch and roll, 7-9 DVL velocity xyz, 10 DVL altitude, 11-12 GPS north and east.
+_NOISE_COLUMNS = 13
 
 
 @dataclass(frozen=True)
@@ -139,14 +146,11 @@ class LoopRecord:
     completed: bool
 
 
-class _Normals:
-    """Standard normal draws in blocks, handed out one row per step (deterministic for a seed)."""
-
-    def __init__(self, rng: np.random.Generator) -> None:
-        self._rng = rng
-
-    def block(self) -> list[list[float]]:
-        return self._rng.standard_normal((_NOISE_BLOCK, _NOISE_COLUMNS)).tolist()
+def _normal_rows(rng: np.random.Generator) -> Iterator[list[float]]:
+    """Standard normal draws, one row of :data:`_NOISE_COLUMNS` per step, drawn in blocks (deterministic
+    for a seed)."""
+    while True:
+        yield from rng.standard_normal((_NOISE_BLOCK, _NOISE_COLUMNS)).tolist()
 
 
 class Table:
@@ -195,6 +199,368 @@ def initial_heading(mission: Mission) -> float:
             if legs:
                 return math.atan2(legs[0][3], legs[0][2])
     return 0.0
+
+
+# ---------------------------------------------------------------------------------------------
+# The true vehicle
+# ---------------------------------------------------------------------------------------------
+
+
+class _TrueVehicle:
+    """The true vehicle (guidance never reads it): its state and its integration from step to step.
+
+    State (SI, radians, local NED): position ``n, e, d``, heading ``psi``, yaw rate ``r``, speed
+    ``u``, vertical rate ``w`` (down), this step's pitch ``theta``, roll ``phi`` and velocity over
+    ground ``vn, ve``; ``at_surface``; ``floor_d``, the seafloor depth below the vehicle at the last
+    DVL ping (what stops the hull). Every step is logged (``t_s``, ``pose``, ``surface``).
+    """
+
+    def __init__(
+        self,
+        dynamics: VehicleDynamics,
+        *,
+        dt_s: float,
+        psi_rad: float,
+        d_m: float,
+        eta: Table,
+        dvl_lever_down_m: float,
+    ) -> None:
+        dyn = self.dyn = dynamics
+        self.dt, self.eta, self.lz = dt_s, eta, dvl_lever_down_m
+        self.ga = math.exp(-dt_s / dyn.attitude_noise_tau_s)  # attitude noise: first-order Gauss-Markov
+        self.gb = dyn.attitude_noise_rad * math.sqrt(1.0 - self.ga * self.ga)
+        self.k_speed = dt_s / dyn.speed_tau_s
+        self.k_yaw = dt_s / dyn.yaw_rate_tau_s
+        self.k_vert = dt_s / dyn.vertical_tau_s
+        self.r_max = dyn.yaw_rate_max_rad_s
+        self.n = self.e = 0.0
+        self.d = d_m
+        self.psi = psi_rad
+        self.r = self.u = self.w = 0.0
+        self.x_pitch = self.x_roll = 0.0
+        self.theta = self.phi = self.vn = self.ve = 0.0
+        self.at_surface = True
+        self.floor_d = math.inf
+        self.bottom_contacts = 0
+        self.t_s: list[float] = []
+        self.pose: list[tuple[float, float, float, float, float, float]] = []
+        self.surface: list[bool] = []
+
+    def start_step(self, z: list[float]) -> None:
+        """This step's attitude (passively stable: small, not zero) and velocity over ground."""
+        dyn, u = self.dyn, self.u
+        self.x_pitch = x_pitch = self.ga * self.x_pitch + self.gb * z[5]
+        self.x_roll = x_roll = self.ga * self.x_roll + self.gb * z[6]
+        self.theta = dyn.pitch_trim_rad + dyn.pitch_rad_per_mps * self.w + x_pitch
+        self.phi = dyn.roll_trim_rad + dyn.roll_rad_per_mps2 * u * self.r + x_roll
+        self.vn, self.ve = u * math.cos(self.psi), u * math.sin(self.psi)
+
+    def advance(self, t_s: float, u_cmd: float, r_cmd: float, w_cmd: float) -> bool:
+        """Log step ``t_s``, then integrate to the next under the commands; True when the vehicle
+        reaches the surface."""
+        dyn, dt, r, w = self.dyn, self.dt, self.r, self.w
+        self.t_s.append(t_s)
+        self.pose.append((self.n, self.e, self.d, self.psi, self.theta, self.phi))
+        self.surface.append(self.at_surface)
+        self.n += self.vn * dt
+        self.e += self.ve * dt
+        self.psi = _wrap(self.psi + r * dt)
+        self.r = _clamp(r + (r_cmd - r) * self.k_yaw, self.r_max)
+        self.u += (u_cmd - self.u) * self.k_speed
+        if self.at_surface and w_cmd > 0.0:  # leave the surface (never in a surface wait: w_cmd = 0)
+            self.at_surface = False
+        if self.at_surface:  # floating at its draft below the instantaneous sea level
+            self.w = 0.0
+            self.d = -self.eta(t_s + dt) + dyn.draft_m
+            return False
+        d = self.d + w * dt
+        w += (w_cmd - w) * self.k_vert
+        if d + self.lz > self.floor_d - dyn.bottom_clearance_m:  # the seafloor stops the vehicle
+            d, w = self.floor_d - dyn.bottom_clearance_m - self.lz, min(w, 0.0)
+            self.bottom_contacts += 1
+        surface_d = -self.eta(t_s + dt) + dyn.draft_m
+        surfaced = d <= surface_d and w < 0.0
+        if surfaced:
+            d, w, self.at_surface = surface_d, 0.0, True
+        self.d, self.w = d, w
+        return surfaced
+
+
+# ---------------------------------------------------------------------------------------------
+# Sensors of one step
+# ---------------------------------------------------------------------------------------------
+
+
+class _Instruments:
+    """The sensors of one step, measuring the true vehicle with noise (one row of standard normal
+    draws ``z`` per step, columns as in :data:`_NOISE_COLUMNS`) and the dive's errors; each logs what
+    it measured (``compass_log``, ``dvl_log``, ``gps_log``)."""
+
+    def __init__(
+        self,
+        sensors: SensorModels,
+        errors: PerDiveErrors,
+        *,
+        dt_s: float,
+        seafloor: Seafloor,
+        b_ned_T: tuple[float, float, float],
+        iron: tuple[float, ...],
+        dvl_lever_body_m: tuple[float, float, float],
+        gps_lever_body_m: tuple[float, float, float],
+    ) -> None:
+        self.dvl_every = max(round(1.0 / (sensors.dvl_rate_hz * dt_s)), 1)  # steps between pings
+        self.gps_every = max(round(1.0 / (sensors.gps_rate_hz * dt_s)), 1)
+        self.seafloor, self.iron = seafloor, iron
+        self.bn_T, self.be_T, self.bd_T = b_ned_T
+        self.s_mag, self.s_tilt = sensors.magnetometer_sigma_T, sensors.tilt_sigma_rad
+        self.res = sensors.heading_resolution_rad
+        self.s_dvl, self.s_alt = sensors.dvl_velocity_sigma_mps, sensors.dvl_altitude_sigma_m
+        self.alt_min, self.alt_max = sensors.dvl_min_altitude_m, sensors.dvl_max_altitude_m
+        self.s_gps = sensors.gps_sigma_m
+        self.scale = 1.0 + errors.dvl_scale
+        self.M = [float(v) for v in errors.R_sensor_body_dvl.ravel()]
+        self.lx, self.ly, self.lz = dvl_lever_body_m
+        self.gps_lever = gps_lever_body_m
+        self.compass_log: list[tuple[float, float, float, float, float, float]] = []
+        self.dvl_log: list[tuple[float, float, float, float, float, float]] = []
+        self.gps_log: list[tuple[float, float, float]] = []
+
+    def compass(self, v: _TrueVehicle, z: list[float]) -> tuple[float, float, float]:
+        """Magnetometer (eq. 2, noise) and inclinometer: the compass heading (eq. 1 with the measured
+        tilt, quantised) and the measured pitch and roll, radians."""
+        theta_m = v.theta + self.s_tilt * z[3]
+        phi_m = v.phi + self.s_tilt * z[4]
+        bx, by, bz = ned2body(v.psi, v.theta, v.phi, self.bn_T, self.be_T, self.bd_T)
+        mx, my, mz = distort(self.iron, bx, by, bz)
+        mx += self.s_mag * z[0]
+        my += self.s_mag * z[1]
+        mz += self.s_mag * z[2]
+        h_meas = _wrap(quantise(compass_heading(mx, my, mz, theta_m, phi_m), self.res))
+        self.compass_log.append((h_meas, theta_m, phi_m, mx, my, mz))
+        return h_meas, theta_m, phi_m
+
+    def dvl(
+        self, t_s: float, v: _TrueVehicle, z: list[float]
+    ) -> tuple[bool, float, float, float, float, float]:
+        """One bottom-track ping: ``(valid, vx, vy, vz, altitude_m, slope_rate_mps)``, the velocity in
+        the DVL frame (true mounting, scale error), the altitude of the DVL and the rate at which the
+        seafloor deepens along the track (what the four beams see); ``valid`` within the DVL's
+        altitude range. Also refreshes the true vehicle's ``floor_d``."""
+        vn, ve = v.vn, v.ve
+        vx, vy, vz = ned2body(v.psi, v.theta, v.phi, vn, ve, v.w)
+        vx, vy = vx - v.r * self.ly, vy + v.r * self.lx  # + omega x lever, omega ~ (0, 0, r)
+        M, scale, s_dvl = self.M, self.scale, self.s_dvl
+        sx = scale * (M[0] * vx + M[1] * vy + M[2] * vz) + s_dvl * z[7]
+        sy = scale * (M[3] * vx + M[4] * vy + M[5] * vz) + s_dvl * z[8]
+        sz = scale * (M[6] * vx + M[7] * vy + M[8] * vz) + s_dvl * z[9]
+        floor_d, gn, ge = self.seafloor.depth_and_gradient(v.n, v.e)
+        v.floor_d = floor_d
+        alt_true = floor_d - (v.d + self.lz)
+        valid = self.alt_min <= alt_true <= self.alt_max
+        alt_meas = alt_true + self.s_alt * z[10]
+        self.dvl_log.append((t_s, sx, sy, sz, alt_meas, 1.0) if valid else (t_s, 0.0, 0.0, 0.0, 0.0, 0.0))
+        return valid, sx, sy, sz, alt_meas, gn * vn + ge * ve
+
+    def gps(self, t_s: float, v: _TrueVehicle, z: list[float]) -> tuple[float, float]:
+        """One GPS fix: north and east of the antenna plus noise, metres."""
+        an, ae, _ = body2ned(v.psi, v.theta, v.phi, *self.gps_lever)
+        fix = (v.n + an + self.s_gps * z[11], v.e + ae + self.s_gps * z[12])
+        self.gps_log.append((t_s, *fix))
+        return fix
+
+
+# ---------------------------------------------------------------------------------------------
+# The onboard navigation and the guidance on it
+# ---------------------------------------------------------------------------------------------
+
+
+class _Onboard:
+    """The vehicle's own navigation, all that guidance sees.
+
+    Heading ``psi`` (compass, correction, declination), measured ``pitch`` and ``roll``, position
+    ``pn, pe`` by dead reckoning of the DVL velocity ``v_body`` (the thrust command as speed through
+    the water without bottom lock), reset to the mean GPS fix at the end of a surface wait; the DVL's
+    altitude ``alt_m``, ``bottom_lock``, ``last_alt_m`` (the last valid altitude) and the seafloor's
+    ``slope_rate``. Every step is logged (``log``: north, east, heading).
+    """
+
+    def __init__(
+        self,
+        *,
+        declination_rad: float,
+        correction: Table | None,
+        R_body_sensor_dvl_nominal: FloatArray,
+        gps_lever_body_m: tuple[float, float, float],
+    ) -> None:
+        self.declination_rad, self.correction = declination_rad, correction
+        self.N = [float(v) for v in R_body_sensor_dvl_nominal.ravel()]
+        self.gps_lever = gps_lever_body_m
+        self.pn = self.pe = 0.0
+        self.psi = self.pitch = self.roll = 0.0
+        self.v_body = (0.0, 0.0, 0.0)
+        self.alt_m, self.bottom_lock = 0.0, False
+        self.last_alt_m = math.inf  # lock lost close to the bottom means too close
+        self.slope_rate = 0.0
+        self.fixes: list[tuple[float, float]] = []  # GPS fixes since the mission's segment started
+        self.log: list[tuple[float, float, float]] = []
+
+    def compass(self, h_meas: float, pitch_m: float, roll_m: float) -> None:
+        """Heading from the compass heading (correction and declination added); measured pitch and roll."""
+        h_corr = h_meas + self.correction(h_meas) if self.correction is not None else h_meas
+        self.psi = _wrap(h_corr + self.declination_rad)
+        self.pitch, self.roll = pitch_m, roll_m
+
+    def dvl(self, ping: tuple[bool, float, float, float, float, float], u_cmd: float) -> None:
+        """Take a DVL ping (:meth:`_Instruments.dvl`); ``u_cmd`` is the speed command in force."""
+        valid, sx, sy, sz, self.alt_m, self.slope_rate = ping
+        self.bottom_lock = valid
+        if valid:
+            self.last_alt_m = self.alt_m
+            N = self.N  # the mounting the vehicle believes
+            self.v_body = (
+                N[0] * sx + N[1] * sy + N[2] * sz,
+                N[3] * sx + N[4] * sy + N[5] * sz,
+                N[6] * sx + N[7] * sy + N[8] * sz,
+            )
+        else:
+            self.v_body = (u_cmd, 0.0, 0.0)  # no bottom lock: speed through water from the thrust command
+
+    def new_segment(self, after_surface_wait: bool) -> None:
+        """The mission moves on: after a surface wait, reset the position to the mean of its GPS
+        fixes (antenna lever arm removed with the onboard attitude); the fixes start anew."""
+        fixes = self.fixes
+        if after_surface_wait and fixes:
+            an, ae, _ = body2ned(self.psi, self.pitch, self.roll, *self.gps_lever)
+            self.pn = sum(f[0] for f in fixes) / len(fixes) - an
+            self.pe = sum(f[1] for f in fixes) / len(fixes) - ae
+        self.fixes = []
+
+    def dead_reckon(self, dt_s: float) -> None:
+        """Log this step, then move the position on to the next."""
+        self.log.append((self.pn, self.pe, self.psi))
+        vn, ve, _ = body2ned(self.psi, self.pitch, self.roll, *self.v_body)
+        self.pn += vn * dt_s
+        self.pe += ve * dt_s
+
+
+class _Guidance:
+    """Mission segments and the speed, yaw-rate and vertical-rate commands, from the onboard state
+    only.
+
+    A line follows its legs (course = leg bearing - atan(cross-track error / lookahead), the next leg
+    taken ``turn_anticipation_m`` before a leg's end, slower in sharp turns); a heading autopilot
+    turns the onboard heading onto the course; the altitude loop holds the commanded altitude with
+    the seafloor's slope as feed-forward. ``done`` marks the current segment finished: the next
+    starts at the next step.
+    """
+
+    def __init__(self, mission: Mission, dynamics: VehicleDynamics, *, dvl_max_altitude_m: float) -> None:
+        self.mission, self.dyn = mission, dynamics
+        self.alt_max = dvl_max_altitude_m
+        self.segments = list(mission.segments)
+        self.i = -1
+        self.segment: Segment | None = None
+        self.t0 = 0.0
+        self.legs: list[tuple[float, float, float, float, float]] = []
+        self.leg_i = 0
+        self.hold = 0.0  # the heading to hold off lines, from each segment's start
+        self.spun = 0.0
+        self.last_psi = 0.0
+        self.speed = mission.speed_mps
+        self.altitude = mission.altitude_m
+        self.vrate = dynamics.vertical_rate_max_mps
+        self.done = True  # enter the first segment
+
+    @property
+    def finished(self) -> bool:
+        """The mission's last segment is done."""
+        return self.done and self.i == len(self.segments) - 1
+
+    def surfaced(self) -> None:
+        """The vehicle reached the surface: an ascent is done."""
+        if isinstance(self.segment, Ascend):
+            self.done = True
+
+    def _next_segment(self, t_s: float, nav: _Onboard) -> None:
+        nav.new_segment(after_surface_wait=isinstance(self.segment, Surface))
+        self.i += 1
+        self.segment = seg = self.segments[self.i]
+        self.t0 = t_s
+        self.hold = self.last_psi = nav.psi
+        self.spun = 0.0
+        if isinstance(seg, Descend | Ascend):
+            self.vrate = seg.rate_mps or self.dyn.vertical_rate_max_mps
+        if isinstance(seg, Line):
+            self.legs = _legs(seg.waypoints_ne_m, (nav.pn, nav.pe), self.dyn.waypoint_capture_m)
+            self.leg_i = 0
+            self.speed = seg.speed_mps or self.mission.speed_mps
+            self.altitude = seg.altitude_m or self.mission.altitude_m
+
+    def commands(self, t_s: float, nav: _Onboard) -> tuple[float, float, float]:
+        """``(u_cmd, r_cmd, w_cmd)``: speed, yaw rate and vertical rate (down) for step ``t_s``,
+        after moving on to the next segment when the current one is done."""
+        dyn, psi = self.dyn, nav.psi
+        if self.done:
+            self._next_segment(t_s, nav)
+        self.done = False
+        seg = self.segment
+        u_cmd = 0.0
+        heading_cmd = self.hold
+        r_cmd = None
+        alt_cmd = self.altitude
+        if isinstance(seg, Surface):
+            self.done = t_s - self.t0 >= seg.duration_s
+        elif isinstance(seg, Descend):
+            alt_cmd = self.mission.altitude_m
+            if nav.bottom_lock and abs(nav.alt_m - alt_cmd) < dyn.altitude_tolerance_m:
+                self.done = True
+        elif isinstance(seg, Ascend):
+            pass  # straight up (w_cmd below) until the surface
+        elif isinstance(seg, Spin):
+            self.spun += _wrap(psi - self.last_psi)
+            self.last_psi = psi
+            r_cmd = seg.direction * seg.rate_rad_s
+            self.done = abs(self.spun) >= seg.turns * TWO_PI
+        else:  # Line
+            u_cmd, heading_cmd = self._follow_line(nav.pn, nav.pe, psi)
+        if r_cmd is None:
+            r_cmd = _clamp(dyn.heading_gain_per_s * _wrap(heading_cmd - psi), dyn.yaw_rate_max_rad_s)
+        return u_cmd, r_cmd, self._vertical_rate(nav, alt_cmd)
+
+    def _follow_line(self, pn: float, pe: float, psi: float) -> tuple[float, float]:
+        """Speed and heading commands on a line: the current leg is the first whose end (less the
+        turn anticipation) the onboard position has not passed; the line is done past the last."""
+        dyn, legs, leg_i = self.dyn, self.legs, self.leg_i
+        while leg_i < len(legs):
+            an, ae, tn, te, length = legs[leg_i]
+            dn, de = pn - an, pe - ae
+            if dn * tn + de * te < length - min(dyn.turn_anticipation_m, 0.5 * length):
+                break
+            leg_i += 1
+        self.leg_i = leg_i
+        if leg_i == len(legs):
+            self.done = True
+            return 0.0, self.hold
+        cross = -dn * te + de * tn  # positive: right of the leg
+        heading_cmd = math.atan2(te, tn) - math.atan(cross / dyn.lookahead_m)
+        self.hold = heading_cmd
+        return self.speed * max(dyn.min_speed_fraction, math.cos(_wrap(heading_cmd - psi))), heading_cmd
+
+    def _vertical_rate(self, nav: _Onboard, alt_cmd: float) -> float:
+        if isinstance(self.segment, Ascend):
+            return -self.vrate
+        if isinstance(self.segment, Surface):
+            return 0.0
+        if nav.bottom_lock:
+            return _clamp(nav.slope_rate + self.dyn.altitude_gain_per_s * (nav.alt_m - alt_cmd), self.vrate)
+        if nav.last_alt_m > 0.5 * self.alt_max:
+            return self.vrate  # no bottom in sight yet: descend
+        return -self.dyn.lost_bottom_climb_mps  # lock lost close to the seafloor: back off
+
+
+# ---------------------------------------------------------------------------------------------
+# The closed loop
+# ---------------------------------------------------------------------------------------------
 
 
 def fly(
@@ -249,243 +615,76 @@ def fly(
     progress : callable, optional
         Called now and then with the elapsed vehicle time, seconds.
     """
-    dyn = dynamics
-    dt = dt_s
-    bn_T, be_T, bd_T = b_ned_T
-    dvl_every = max(round(1.0 / (sensors.dvl_rate_hz * dt)), 1)
-    gps_every = max(round(1.0 / (sensors.gps_rate_hz * dt)), 1)
-    s_mag, s_tilt, res = sensors.magnetometer_sigma_T, sensors.tilt_sigma_rad, sensors.heading_resolution_rad
-    s_dvl, s_alt = sensors.dvl_velocity_sigma_mps, sensors.dvl_altitude_sigma_m
-    alt_min, alt_max = sensors.dvl_min_altitude_m, sensors.dvl_max_altitude_m
-    s_gps = sensors.gps_sigma_m
-    scale = 1.0 + errors.dvl_scale
-    M = [float(v) for v in errors.R_sensor_body_dvl.ravel()]
-    N = [float(v) for v in errors.R_body_sensor_dvl_nominal.ravel()]
-    lx, ly, lz = dvl_lever_body_m
-    ga = math.exp(-dt / dyn.attitude_noise_tau_s)
-    gb = dyn.attitude_noise_rad * math.sqrt(1.0 - ga * ga)
-    k_speed, k_yaw, k_vert = dt / dyn.speed_tau_s, dt / dyn.yaw_rate_tau_s, dt / dyn.vertical_tau_s
-    r_max, w_max = dyn.yaw_rate_max_rad_s, dyn.vertical_rate_max_mps
-
-    normals = _Normals(rng)
-    rows: list[list[float]] = []
-    row_i = 0
-
-    # true state
-    n = e = 0.0
-    psi = initial_heading(mission)
-    r = u = w = 0.0
-    x_pitch = x_roll = 0.0
-    at_surface = True
-    d = -eta(t0_s) + dyn.draft_m
-    # onboard state
-    pn = pe = 0.0
-    v_ob = (0.0, 0.0, 0.0)
-    alt_meas, alt_ok = 0.0, False
-    slope_rate = 0.0
-    # the records
-    rec_t: list[float] = []
-    rec_true: list[tuple[float, ...]] = []
-    rec_ob: list[tuple[float, float, float]] = []
-    rec_meas: list[tuple[float, ...]] = []
-    rec_surface: list[bool] = []
-    dvl_rows: list[tuple[float, ...]] = []
-    gps_rows: list[tuple[float, float, float]] = []
+    truth = _TrueVehicle(
+        dynamics,
+        dt_s=dt_s,
+        psi_rad=initial_heading(mission),
+        d_m=-eta(t0_s) + dynamics.draft_m,
+        eta=eta,
+        dvl_lever_down_m=dvl_lever_body_m[2],
+    )
+    instruments = _Instruments(
+        sensors,
+        errors,
+        dt_s=dt_s,
+        seafloor=seafloor,
+        b_ned_T=b_ned_T,
+        iron=iron,
+        dvl_lever_body_m=dvl_lever_body_m,
+        gps_lever_body_m=gps_lever_body_m,
+    )
+    nav = _Onboard(
+        declination_rad=declination_rad,
+        correction=correction,
+        R_body_sensor_dvl_nominal=errors.R_body_sensor_dvl_nominal,
+        gps_lever_body_m=gps_lever_body_m,
+    )
+    guidance = _Guidance(mission, dynamics, dvl_max_altitude_m=sensors.dvl_max_altitude_m)
+    dvl_every, gps_every = instruments.dvl_every, instruments.gps_every
     surfacing: list[tuple[float, float, float]] = []
-
-    segments = list(mission.segments)
-    seg_i = -1
-    seg: object = None
-    seg_t0 = 0.0
-    legs: list[tuple[float, float, float, float, float]] = []
-    leg_i = 0
-    hold = psi
-    spun = 0.0
-    last_psi_ob = 0.0
-    fixes: list[tuple[float, float]] = []
-    speed = mission.speed_mps
-    altitude = mission.altitude_m
-    vrate = w_max
-    u_cmd = 0.0
-    last_alt_m = math.inf  # the last altitude the DVL measured: lock lost near the bottom means too close
-    floor_d = math.inf
-    bottom_contacts = 0
-
-    k = 0
+    noise = _normal_rows(rng)
+    u_cmd = 0.0  # the speed command in force (dead reckoning uses it without bottom lock)
     completed = False
-    steps_max = int(max_duration_s / dt)
-    psi_ob = psi
-    seg_done = True  # enter the first segment
-    while k <= steps_max:
-        t = t0_s + k * dt
-        if row_i == len(rows):
-            rows, row_i = normals.block(), 0
-        z = rows[row_i]
-        row_i += 1
-
-        # ---- the vehicle's attitude (passively stable: small, not zero) ----
-        x_pitch = ga * x_pitch + gb * z[5]
-        x_roll = ga * x_roll + gb * z[6]
-        theta = dyn.pitch_trim_rad + dyn.pitch_rad_per_mps * w + x_pitch
-        phi = dyn.roll_trim_rad + dyn.roll_rad_per_mps2 * u * r + x_roll
-
-        # ---- sensors ----
-        theta_m = theta + s_tilt * z[3]
-        phi_m = phi + s_tilt * z[4]
-        bx, by, bz = ned2body(psi, theta, phi, bn_T, be_T, bd_T)
-        mx, my, mz = distort(iron, bx, by, bz)
-        mx += s_mag * z[0]
-        my += s_mag * z[1]
-        mz += s_mag * z[2]
-        h_meas = _wrap(quantise(compass_heading(mx, my, mz, theta_m, phi_m), res))
-        h_corr = h_meas + correction(h_meas) if correction is not None else h_meas
-        psi_ob = _wrap(h_corr + declination_rad)
-
-        vn, ve = u * math.cos(psi), u * math.sin(psi)
+    for k in range(int(max_duration_s / dt_s) + 1):
+        t = t0_s + k * dt_s
+        z = next(noise)
+        truth.start_step(z)
+        nav.compass(*instruments.compass(truth, z))
         if k % dvl_every == 0:
-            vx, vy, vz = ned2body(psi, theta, phi, vn, ve, w)
-            vx, vy = vx - r * ly, vy + r * lx  # + omega x lever, omega ~ (0, 0, r)
-            sx = scale * (M[0] * vx + M[1] * vy + M[2] * vz) + s_dvl * z[7]
-            sy = scale * (M[3] * vx + M[4] * vy + M[5] * vz) + s_dvl * z[8]
-            sz = scale * (M[6] * vx + M[7] * vy + M[8] * vz) + s_dvl * z[9]
-            floor_d, gn, ge = seafloor.depth_and_gradient(n, e)
-            alt_true = floor_d - (d + lz)
-            alt_ok = alt_min <= alt_true <= alt_max
-            alt_meas = alt_true + s_alt * z[10]
-            slope_rate = gn * vn + ge * ve
-            if alt_ok:
-                last_alt_m = alt_meas
-                dvl_rows.append((t, sx, sy, sz, alt_meas, 1.0))
-                v_ob = (
-                    N[0] * sx + N[1] * sy + N[2] * sz,
-                    N[3] * sx + N[4] * sy + N[5] * sz,
-                    N[6] * sx + N[7] * sy + N[8] * sz,
-                )
-            else:
-                dvl_rows.append((t, 0.0, 0.0, 0.0, 0.0, 0.0))
-                v_ob = (u_cmd, 0.0, 0.0)  # no bottom lock: speed through water from the thrust command
-        if at_surface and k % gps_every == 0:
-            an, ae, _ = body2ned(psi, theta, phi, *gps_lever_body_m)
-            gps_rows.append((t, n + an + s_gps * z[11], e + ae + s_gps * z[12]))
-            fixes.append((gps_rows[-1][1], gps_rows[-1][2]))
-
-        # ---- mission segments and guidance on the onboard state ----
-        if seg_done:
-            if isinstance(seg, Surface) and fixes:
-                an, ae, _ = body2ned(psi_ob, theta_m, phi_m, *gps_lever_body_m)
-                pn = sum(f[0] for f in fixes) / len(fixes) - an
-                pe = sum(f[1] for f in fixes) / len(fixes) - ae
-            seg_i += 1
-            seg = segments[seg_i]
-            seg_t0 = t
-            hold = psi_ob
-            fixes = []
-            spun = 0.0
-            last_psi_ob = psi_ob
-            if isinstance(seg, Descend | Ascend):
-                vrate = seg.rate_mps or w_max
-            if isinstance(seg, Line):
-                legs = _legs(seg.waypoints_ne_m, (pn, pe), dyn.waypoint_capture_m)
-                leg_i = 0
-                speed = seg.speed_mps or mission.speed_mps
-                altitude = seg.altitude_m or mission.altitude_m
-        seg_done = False
-
-        u_cmd = 0.0
-        heading_cmd = hold
-        r_cmd = None
-        alt_cmd = altitude
-        if isinstance(seg, Surface):
-            seg_done = t - seg_t0 >= seg.duration_s
-        elif isinstance(seg, Descend):
-            alt_cmd = mission.altitude_m
-            if alt_ok and abs(alt_meas - alt_cmd) < dyn.altitude_tolerance_m:
-                seg_done = True
-        elif isinstance(seg, Ascend):
-            pass  # straight up (w_cmd below) until the surface
-        elif isinstance(seg, Spin):
-            spun += _wrap(psi_ob - last_psi_ob)
-            last_psi_ob = psi_ob
-            r_cmd = seg.direction * seg.rate_rad_s
-            seg_done = abs(spun) >= seg.turns * TWO_PI
-        else:  # Line
-            while leg_i < len(legs):
-                an, ae, tn, te, length = legs[leg_i]
-                dn, de = pn - an, pe - ae
-                if dn * tn + de * te < length - min(dyn.turn_anticipation_m, 0.5 * length):
-                    break
-                leg_i += 1
-            if leg_i == len(legs):
-                seg_done = True
-            else:
-                cross = -dn * te + de * tn  # positive: right of the leg
-                heading_cmd = math.atan2(te, tn) - math.atan(cross / dyn.lookahead_m)
-                hold = heading_cmd
-                u_cmd = speed * max(dyn.min_speed_fraction, math.cos(_wrap(heading_cmd - psi_ob)))
-        if r_cmd is None:
-            r_cmd = _clamp(dyn.heading_gain_per_s * _wrap(heading_cmd - psi_ob), r_max)
-        if isinstance(seg, Ascend):
-            w_cmd = -vrate
-        elif isinstance(seg, Surface):
-            w_cmd = 0.0
-        elif alt_ok:
-            w_cmd = _clamp(slope_rate + dyn.altitude_gain_per_s * (alt_meas - alt_cmd), vrate)
-        elif last_alt_m > 0.5 * alt_max:
-            w_cmd = vrate  # no bottom in sight yet: descend
-        else:
-            w_cmd = -dyn.lost_bottom_climb_mps  # lock lost close to the seafloor: back off
-
-        # ---- record step k ----
-        rec_t.append(t)
-        rec_true.append((n, e, d, psi, theta, phi))
-        rec_ob.append((pn, pe, psi_ob))
-        rec_meas.append((h_meas, theta_m, phi_m, mx, my, mz))
-        rec_surface.append(at_surface)
-
-        # ---- integrate to step k + 1 ----
-        vn_ob, ve_ob, _ = body2ned(psi_ob, theta_m, phi_m, *v_ob)
-        pn += vn_ob * dt
-        pe += ve_ob * dt
-        n += vn * dt
-        e += ve * dt
-        psi = _wrap(psi + r * dt)
-        r = _clamp(r + (r_cmd - r) * k_yaw, r_max)
-        u += (u_cmd - u) * k_speed
-        if at_surface and w_cmd > 0.0 and not isinstance(seg, Surface):
-            at_surface = False  # leave the surface
-        if at_surface:
-            w = 0.0
-            d = -eta(t + dt) + dyn.draft_m
-        else:
-            d += w * dt
-            w += (w_cmd - w) * k_vert
-            if d + lz > floor_d - dyn.bottom_clearance_m:  # the seafloor stops the vehicle
-                d, w = floor_d - dyn.bottom_clearance_m - lz, min(w, 0.0)
-                bottom_contacts += 1
-            surface_d = -eta(t + dt) + dyn.draft_m
-            if d <= surface_d and w < 0.0:
-                d, w, at_surface = surface_d, 0.0, True
-                surfacing.append((t + dt, pn - n, pe - e))
-                if isinstance(seg, Ascend):
-                    seg_done = True
-        k += 1
-        if seg_done and seg_i == len(segments) - 1:
+            nav.dvl(instruments.dvl(t, truth, z), u_cmd)
+        if truth.at_surface and k % gps_every == 0:
+            nav.fixes.append(instruments.gps(t, truth, z))
+        u_cmd, r_cmd, w_cmd = guidance.commands(t, nav)
+        nav.dead_reckon(dt_s)
+        if truth.advance(t, u_cmd, r_cmd, w_cmd):  # reached the surface
+            surfacing.append((t + dt_s, nav.pn - truth.n, nav.pe - truth.e))
+            guidance.surfaced()
+        if guidance.finished:
             completed = True
             break
-        if progress is not None and k % 2000 == 0:
-            progress(k * dt)
+        if progress is not None and (k + 1) % 2000 == 0:
+            progress((k + 1) * dt_s)
     if not completed:
         log.warning("the mission was cut at %.0f s of vehicle time before its end", max_duration_s)
-    if bottom_contacts:
-        log.warning("the vehicle touched the seafloor in %d time steps", bottom_contacts)
+    if truth.bottom_contacts:
+        log.warning("the vehicle touched the seafloor in %d time steps", truth.bottom_contacts)
+    return _loop_record(truth, instruments, nav, surfacing, completed)
 
-    true = np.array(rec_true)
-    ob = np.array(rec_ob)
-    meas = np.array(rec_meas)
-    dvl = np.array(dvl_rows).reshape(-1, 6)
-    gps = np.array(gps_rows).reshape(-1, 3)
+
+def _loop_record(
+    truth: _TrueVehicle,
+    instruments: _Instruments,
+    nav: _Onboard,
+    surfacing: list[tuple[float, float, float]],
+    completed: bool,
+) -> LoopRecord:
+    true = np.array(truth.pose)
+    ob = np.array(nav.log)
+    meas = np.array(instruments.compass_log)
+    dvl = np.array(instruments.dvl_log).reshape(-1, 6)
+    gps = np.array(instruments.gps_log).reshape(-1, 3)
     return LoopRecord(
-        t_s=np.array(rec_t),
+        t_s=np.array(truth.t_s),
         p_ned_m=true[:, :3],
         yaw_rad=true[:, 3],
         pitch_rad=true[:, 4],
@@ -496,7 +695,7 @@ def fly(
         pitch_measured_rad=meas[:, 1],
         roll_measured_rad=meas[:, 2],
         magnetometer_T=meas[:, 3:6],
-        at_surface=np.array(rec_surface, dtype=bool),
+        at_surface=np.array(truth.surface, dtype=bool),
         dvl_t_s=dvl[:, 0],
         dvl_v_sensor_mps=dvl[:, 1:4],
         dvl_altitude_m=dvl[:, 4],

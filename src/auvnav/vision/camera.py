@@ -49,6 +49,19 @@ class Rectification:
     baseline_m: float
 
 
+@dataclass(frozen=True)
+class StereoGeometry:
+    """What triangulation needs of a rectification: the rectified focal length, principal point and
+    baseline, and the rotation of the left camera into its rectified frame (a :class:`Rectification`
+    has them too)."""
+
+    f_px: float
+    cx_px: float
+    cy_px: float
+    baseline_m: float
+    R1: FloatArray
+
+
 def rectification(rig: StereoRig) -> Rectification:
     """The rectified geometry of ``rig`` (both cameras must share an image size)."""
     if (rig.left.width, rig.left.height) != (rig.right.width, rig.right.height):
@@ -109,7 +122,7 @@ def rectify_points(uv_px: FloatArray, cam: CameraModel, R: FloatArray, P: FloatA
 def triangulate(
     uv_left_px: FloatArray,
     uv_right_px: FloatArray,
-    rect: Rectification,
+    rect: Rectification | StereoGeometry,
     sigma_common_px: float,
     sigma_independent_px: float,
 ) -> tuple[FloatArray, FloatArray]:
@@ -123,7 +136,7 @@ def triangulate(
     ----------
     uv_left_px, uv_right_px : ndarray, shape (N, 2)
         Rectified pixel coordinates of each match.
-    rect : Rectification
+    rect : Rectification or StereoGeometry
     sigma_common_px, sigma_independent_px : float
         1-sigma of the two parts of a keypoint's position error, rectified pixels, each axis.
 

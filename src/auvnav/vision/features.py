@@ -164,6 +164,24 @@ def detect(image: NDArray[np.uint8], settings: FeatureSettings) -> Keypoints:
     return Keypoints(uv, size, np.asarray(desc, dtype=np.uint8))
 
 
+#: The largest SIFT descriptor component OpenCV gives (components of the unit vector are clipped at 0.2,
+#: the vector renormalised and scaled by 512; observed at most 182 over a check dive's 3,500 pairs).
+SIFT_COMPONENT_MAX = 182.0
+
+
+def compand_descriptors(descriptors: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """SIFT descriptors square-root companded to 4 bits: ``round(15 sqrt(d / SIFT_COMPONENT_MAX))``.
+
+    The square root is RootSIFT's (Arandjelovic and Zisserman 2012, "Three things everyone should know
+    to improve object retrieval", CVPR): Euclidean distance between the roots compares descriptors as
+    the Hellinger kernel does, which matches better than Euclidean distance between the raw values; on
+    that scale 16 levels keep the matches (``benchmarks/bench_vision.py``) in half the bytes. Matching,
+    the vocabulary and the cache all use the companded values.
+    """
+    d = np.asarray(descriptors, dtype=np.float32)
+    return np.minimum(np.rint(15.0 * np.sqrt(d / SIFT_COMPONENT_MAX)), 15.0).astype(np.uint8)
+
+
 def match_descriptors(
     desc_a: NDArray[np.uint8], desc_b: NDArray[np.uint8], *, ratio: float
 ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
