@@ -44,11 +44,12 @@ T = Field("t_s", ("t",), check=within(0.0, 4.1e9, "s since 1970", " (POSIX secon
 
 @dataclass(frozen=True)
 class DvlStream(Stream):
-    """DVL bottom-track velocity in the DVL's own frame as logged (FRD when mounted aligned)."""
+    """DVL bottom-track velocity in the DVL's own frame as logged (FRD when mounted aligned); the
+    altitude is optional (not every DVL log has it: what needs it says so)."""
 
     t_s: NDArray[np.float64]
     v_sensor_mps: NDArray[np.float64]  # (N, 3)
-    altitude_m: NDArray[np.float64]
+    altitude_m: NDArray[np.float64] | None
     valid: NDArray[np.bool_]
     FILE: ClassVar[str] = "nav/dvl"
     FIELDS: ClassVar[tuple[Field, ...]] = (
@@ -58,7 +59,7 @@ class DvlStream(Stream):
             ("vx_mps", "vy_mps", "vz_mps"),
             check=within(-10, 10, "m/s", ": not m/s?"),
         ),
-        Field("altitude_m", ("altitude_m",), check=within(0, 1000, "m")),
+        Field("altitude_m", ("altitude_m",), required=False, check=within(0, 1000, "m")),
         Field("valid", ("valid",), kind="bool"),
     )
 

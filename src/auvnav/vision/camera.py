@@ -168,10 +168,10 @@ def triangulate(
     J[:, 2, 1] = f * k2
     c2, i2 = sigma_common_px**2, sigma_independent_px**2
     C = np.array([[c2 + i2, c2, 0, 0], [c2, c2 + i2, 0, 0], [0, 0, c2 + i2, c2], [0, 0, c2, c2 + i2]])
-    cov_rect = np.einsum("nij,jk,nlk->nil", J, C, J)
+    cov_rect = (J @ C) @ np.swapaxes(J, 1, 2)  # matrix products: einsum's three-operand path is 5x slower
     p_rect = np.stack([X, Y, Z], axis=1)
-    R1 = rect.R1
-    return p_rect @ R1, np.einsum("ji,njk,kl->nil", R1, cov_rect, R1)
+    R1 = np.asarray(rect.R1, dtype=float)
+    return p_rect @ R1, R1.T @ cov_rect @ R1
 
 
 _MAPS: dict[str, tuple[tuple[NDArray, NDArray], tuple[NDArray, NDArray]]] = {}

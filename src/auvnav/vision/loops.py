@@ -334,6 +334,8 @@ def _map(
 
 def image_altitude(dive: Dive, t_s: FloatArray) -> FloatArray:
     """DVL altitude at the image times (valid samples interpolated), metres."""
+    if dive.dvl.altitude_m is None:
+        raise InsufficientDataError("nav/dvl: no altitude_m column; cannot place image footprints")
     ok = dive.dvl.valid & np.isfinite(dive.dvl.altitude_m) & (dive.dvl.altitude_m > 0)
     if ok.sum() < 2:
         raise InsufficientDataError("nav/dvl: fewer than two valid altitudes; cannot place image footprints")
