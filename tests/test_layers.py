@@ -47,7 +47,7 @@ def tree(tmp_path: Path) -> Path:
             "import auvnav.slam.stage",
             "Stages import models of other domains, never each other",
         ),
-        ("slam/graph.py", "import auvnav.sim.camera", "Nothing in processing imports the simulator"),
+        ("slam/graph.py", "import auvnav.sim.camera", "No processing module imports the simulator"),
         ("frames.py", "import auvnav.dive", "Layers of DESIGN section 3"),
         ("vision/features.py", "import matplotlib", "Plotting lives in report/"),
     ],

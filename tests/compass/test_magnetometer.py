@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -217,15 +218,15 @@ def test_field_model_error_moves_the_vertical_offset(level_spin, scott_reef_fiel
     np.testing.assert_allclose(h_wrong[:2], h[:2], atol=1e-9)
 
 
-def test_level_spin_warns_vertical_unobservable(scott_reef_field, caplog) -> None:
-    """Without any tilt the ellipsoid fit cannot separate the vertical offset: it says so."""
+def test_level_spin_refuses_the_ellipsoid(scott_reef_field) -> None:
+    """Without any tilt the ellipsoid fit cannot separate the vertical offset: an error that says so
+    (it used to be a success with a warning)."""
     f = scott_reef_field
     heading = np.linspace(0.0, 4.0 * np.pi, 400)
     m = distort_field(_body_field(f, heading, 0.0, 0.0), H_SOFT_SYMMETRIC, HARD_IRON_FRACTION * f.total_T)
     m += np.random.default_rng(1).normal(0.0, 1e-3 * f.total_T, m.shape)
-    with caplog.at_level(logging.WARNING, logger="auvnav.compass.magnetometer"):
+    with pytest.raises(InsufficientDataError, match="do not determine the hard iron along body"):
         calibrate_magnetometer(m, 0.0, 0.0, method="ellipsoid")
-    assert "vertical hard-iron offset is poorly determined" in caplog.text
 
 
 def test_too_few_samples() -> None:
@@ -262,3 +263,90 @@ def test_calibration_summary_and_validation() -> None:
         MagnetometerCalibration(np.zeros(3), np.eye(2), 0.2, 0.001, 0.3, 0.002, "levelled", 100)
     with pytest.raises(ValueError, match="inclination_rad"):
         MagnetometerCalibration(np.zeros(3), np.eye(3), 0.2, 0.001, 0.3, 0.002, "levelled", 100, 2.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Raw samples alone (issue 15): the general ellipsoid, and degenerate sets refused
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Samples:
+    m: np.ndarray
+    pitch: np.ndarray
+    roll: np.ndarray
+    hard: np.ndarray
+    total: float
+
+
+def _samples(
+    field: EarthField, tilt_deg: float, *, n: int = 1500, noise: float = 1e-3, seed: int = 0
+) -> Samples:
+    """Three turns with pitch and roll within +-tilt_deg (a tilted-plane set for small tilts)."""
+    rng = np.random.default_rng(seed)
+    heading = np.linspace(0.0, 6.0 * np.pi, n)
+    pitch = np.radians(tilt_deg * np.sin(np.linspace(0.0, 23.0, n)))
+    roll = np.radians(tilt_deg * np.sin(np.linspace(0.7, 31.0, n)))
+    hard = HARD_IRON_FRACTION * field.total_T
+    m = distort_field(_body_field(field, heading, pitch, roll), H_SOFT_SYMMETRIC, hard)
+    m = m + rng.normal(0.0, noise * field.total_T, m.shape)
+    noise_rad = np.radians(0.05)
+    return Samples(
+        m, pitch + rng.normal(0, noise_rad, n), roll + rng.normal(0, noise_rad, n), hard, field.total_T
+    )
+
+
+def test_general_fit_from_samples_alone(scott_reef_field) -> None:
+    """Samples that tilt +-40 degrees determine hard iron and soft iron without attitude or model."""
+    s = _samples(scott_reef_field, 40.0)
+    cal = calibrate_magnetometer(s.m, 0.0, 0.0, method="general")
+    assert np.all(np.abs(cal.h_hard_body - s.hard) < HARD_IRON_TOL * s.total)
+    assert cal.field_spread_before > 0.05 and cal.field_spread_after < 0.002
+    assert cal.hard_iron_sigma is not None and np.all(cal.hard_iron_sigma < 0.001)
+    # A is (H_soft + I)^-1 up to scale and a rotation; symmetric H_soft: no rotation.
+    expected = np.linalg.inv(np.eye(3) + H_SOFT_SYMMETRIC)
+    np.testing.assert_allclose(cal.A_soft, expected / np.cbrt(np.linalg.det(expected)), atol=2e-3)
+    assert cal.summary()["hard_iron_sigma_pct"] is not None
+
+
+def test_tilted_plane_samples(scott_reef_field) -> None:
+    """A vehicle that never pitches or rolls more than 10 degrees: from samples alone the hard iron
+    along the vertical is not determined (an error naming the axis; a fit would be 3-6% off while
+    its field spread looked like 0.1%); with pitch, roll and the model's inclination the ellipsoid
+    recovers it within 1% of the field."""
+    f = scott_reef_field
+    s = _samples(f, 10.0)
+    with pytest.raises(InsufficientDataError, match=r"along body \(.*\+1\.00\): formal 1-sigma") as err:
+        calibrate_magnetometer(s.m, 0.0, 0.0, method="general")
+    assert "give pitch and roll and the field model" in str(err.value)
+    cal = calibrate_magnetometer(s.m, s.pitch, s.roll, method="ellipsoid", inclination_rad=f.inclination_rad)
+    assert np.all(np.abs(cal.h_hard_body - s.hard) < HARD_IRON_TOL * s.total)
+    assert cal.field_spread_after < 0.002
+
+
+@pytest.mark.parametrize("method", ["general", "levelled", "ellipsoid"])
+def test_a_constant_is_not_a_calibration(scott_reef_field, method: str) -> None:
+    """A magnetometer that never turned: an error, not a hard iron of 23,000% of the field."""
+    f = scott_reef_field
+    m = np.tile(_body_field(f, 0.3, 0.0, 0.0), (200, 1))
+    m += np.random.default_rng(2).normal(0.0, 1e-3 * f.total_T, m.shape)
+    with pytest.raises(InsufficientDataError, match="samples are a constant"):
+        calibrate_magnetometer(m, 0.0, 0.0, method=method)
+
+
+def test_a_plane_is_refused_by_the_general_fit(level_spin, scott_reef_field) -> None:
+    _heading, measure = level_spin
+    m = measure(H_SOFT_SYMMETRIC, HARD_IRON_FRACTION * scott_reef_field.total_T)
+    with pytest.raises(InsufficientDataError, match="lie in a plane"):
+        calibrate_magnetometer(m, 0.0, 0.0, method="general")
+
+
+@pytest.mark.parametrize("method", ["general", "levelled"])
+def test_too_few_directions(scott_reef_field, method: str) -> None:
+    """Half a turn (tilting): too few distinct headings."""
+    f = scott_reef_field
+    heading = np.linspace(0.0, 0.9 * np.pi, 400)
+    pitch = np.radians(40.0 * np.sin(np.linspace(0.0, 23.0, 400)))
+    m = distort_field(_body_field(f, heading, pitch, 0.0), H_SOFT_SYMMETRIC, HARD_IRON_FRACTION * f.total_T)
+    with pytest.raises(InsufficientDataError, match="too few distinct directions; turn the vehicle"):
+        calibrate_magnetometer(m, pitch, 0.0, method=method)

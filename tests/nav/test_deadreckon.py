@@ -136,5 +136,5 @@ def test_attitude_gaps_are_interpolated_with_a_warning(survey: Motion, caplog) -
     holed = dataclasses.replace(dive, attitude=dive.attitude.select(keep))
     with caplog.at_level(logging.WARNING, logger="auvnav.nav.inputs"):
         dr = dead_reckon(nav_inputs(holed))
-    assert "nav/attitude: 1 gap(s) longer than 5 s (the longest 10.2 s)" in caplog.text
+    assert "nav/attitude: 1 gap(s) longer than 5 median periods (1 s), the longest 10.2 s" in caplog.text
     np.testing.assert_allclose(dr.p_ned_m, survey.truth.p_ned_m, atol=ATOL_EXACT_M)

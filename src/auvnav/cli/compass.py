@@ -11,7 +11,6 @@ import typer
 
 from auvnav import products as P
 from auvnav.cli.common import (
-    DiveArg,
     JsonOpt,
     OverwriteOpt,
     QuietOpt,
@@ -29,6 +28,21 @@ compass_app = typer.Typer(
     help="Compass: declination, magnetometer calibration, deviation fit.", no_args_is_help=True
 )
 app.add_typer(compass_app, name="compass")
+
+
+class _Model(str, Enum):
+    auto = "auto"
+    wmm = "wmm"
+    igrf = "igrf"
+
+
+ModelOpt = Annotated[
+    _Model,
+    typer.Option(
+        "--model",
+        help="Geomagnetic model: wmm, igrf, or auto (WMM inside its years 2010-2030, IGRF-14 outside).",
+    ),
+]
 
 
 def _date2posix(text: str) -> float:
@@ -56,18 +70,21 @@ def declination(
     height_km: Annotated[
         float, typer.Option("--height-km", help="Height above the WGS84 ellipsoid, km.")
     ] = 0.0,
+    model: ModelOpt = _Model.auto,
     as_json: JsonOpt = False,
     verbose: VerboseOpt = 0,
     quiet: QuietOpt = False,
 ) -> None:
-    """The geomagnetic field at a place and date (WMM, or IGRF outside the WMM years)."""
+    """The geomagnetic field at a place and date (WMM, or IGRF outside the WMM years; --model to choose)."""
     import math
 
     from auvnav.compass.field import earth_field, posix2decimal_year
 
     setup_logging(verbose, quiet)
     time_s = _date2posix(date)
-    field = earth_field(math.radians(lat_deg), math.radians(lon_deg), time_s, height_m=1e3 * height_km)
+    field = earth_field(
+        math.radians(lat_deg), math.radians(lon_deg), time_s, height_m=1e3 * height_km, model=model.value
+    )
     north, east, down = (field.b_ned_T * 1e9).tolist()
     d_deg, i_deg = math.degrees(field.declination_rad), math.degrees(field.inclination_rad)
     summary = {
@@ -175,31 +192,83 @@ _register_fit()
 
 
 class _CalibrationMethod(str, Enum):
+    auto = "auto"
     levelled = "levelled"
     ellipsoid = "ellipsoid"
+    general = "general"
 
 
 @compass_app.command("calibrate")
 def compass_calibrate(
-    dive: DiveArg,
+    dive: Annotated[
+        Path | None,
+        typer.Argument(metavar="DIVE", help="A dive folder with nav/magnetometer.csv (a spin)."),
+    ] = None,
+    samples: Annotated[
+        Path | None,
+        typer.Option(
+            "--samples",
+            help="Raw samples instead of a dive: a CSV with x, y, z (or mx, my, mz) in any one unit, "
+            "optionally pitch_deg, roll_deg.",
+        ),
+    ] = None,
     method: Annotated[
         _CalibrationMethod,
-        typer.Option("--method", help="levelled: horizontal fit (a barely tilting spin); ellipsoid: 3D."),
-    ] = _CalibrationMethod.levelled,
+        typer.Option(
+            "--method",
+            help="levelled: horizontal fit (a barely tilting spin); ellipsoid: 3D with attitude; general: "
+            "3D from samples alone; auto: levelled for a dive, general or ellipsoid for samples.",
+        ),
+    ] = _CalibrationMethod.auto,
     field_model: Annotated[
         bool,
         typer.Option(
             "--field-model/--no-field-model",
-            help="Reference the vertical to the geomagnetic model's inclination at the dive's site and date.",
+            help="Reference the vertical to the geomagnetic model's inclination at the site and date "
+            "(a dive's origin and start; for --samples, --latitude-deg --longitude-deg --date).",
         ),
     ] = True,
+    latitude_deg: Annotated[
+        float | None, typer.Option("--latitude-deg", help="--samples: where they were taken, degrees.")
+    ] = None,
+    longitude_deg: Annotated[
+        float | None, typer.Option("--longitude-deg", help="--samples: where they were taken, degrees.")
+    ] = None,
+    date: Annotated[
+        str | None, typer.Option("--date", help="--samples: when (YYYY-MM-DD or decimal year).")
+    ] = None,
+    model: ModelOpt = _Model.auto,
     as_json: JsonOpt = False,
     verbose: VerboseOpt = 0,
     quiet: QuietOpt = False,
 ) -> None:
-    """Hard- and soft-iron calibration from the dive's raw magnetometer (a spin), with heading scores."""
-    from auvnav.compass.calibrate import calibrate_dive, format_calibration
+    """Hard- and soft-iron calibration from a dive's raw magnetometer (a spin), or from raw samples."""
+    import math
+
+    from auvnav.compass.calibrate import (
+        calibrate_dive,
+        calibrate_samples,
+        format_calibration,
+        format_samples_calibration,
+    )
 
     setup_logging(verbose, quiet)
-    summary = calibrate_dive(dive, method=method.value, field_model=field_model)
+    if (dive is None) == (samples is None):
+        raise typer.BadParameter("give a dive folder or --samples FILE.csv (one of them)", param_hint="DIVE")
+    if samples is not None:
+        site_given = [v is not None for v in (latitude_deg, longitude_deg, date)]
+        if any(site_given) and not all(site_given):
+            raise typer.BadParameter(
+                "the field model needs --latitude-deg, --longitude-deg and --date together"
+            )
+        site = None
+        if all(site_given) and field_model:
+            site = (math.radians(latitude_deg), math.radians(longitude_deg), _date2posix(date))  # type: ignore[arg-type]
+        summary = calibrate_samples(samples, method=method.value, site=site, model=model.value)
+        emit(summary, format_samples_calibration(summary), as_json=as_json)
+        return
+    if method == _CalibrationMethod.general:
+        raise typer.BadParameter("general is for --samples; a dive has attitude: use levelled or ellipsoid")
+    dive_method = "levelled" if method == _CalibrationMethod.auto else method.value
+    summary = calibrate_dive(dive, method=dive_method, field_model=field_model, model=model.value)  # type: ignore[arg-type]
     emit(summary, format_calibration(summary), as_json=as_json)

@@ -12,23 +12,32 @@ calibrated heading (eq. 1) is compared with the compass heading as logged and, w
 the vertical (the deviation's constant term), so against the truth it is scored after removing its
 mean offset, which is reported separately.
 ``truth/truth.yaml`` also gives the injected hard iron, scored as a fraction of the field.
+
+:func:`calibrate_samples` calibrates raw samples from a CSV alone (``auvnav compass calibrate
+--samples FILE.csv``): columns ``x, y, z`` (or ``mx, my, mz``) in any one unit, and optionally
+``pitch_deg, roll_deg``. Without attitude it is the general ellipsoid fit from the samples alone
+(hard iron and symmetric soft iron, :func:`auvnav.compass.magnetometer.fit_general`); with attitude
+the 3-D fit whose levelled field is constant (``ellipsoid``, the default) or the levelled fit, and
+with a site and date (``--latitude-deg --longitude-deg --date``) the field model's inclination
+references the vertical. Degenerate samples are an error that says what is missing.
 """
 
 from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import yaml
 
-from auvnav.compass.field import earth_field
+from auvnav.compass.field import ModelChoice, earth_field
 from auvnav.compass.magnetometer import CalibrationMethod, calibrate_magnetometer, heading_from_magnetometer
 from auvnav.dive import read_dive
-from auvnav.errors import DiveFormatError, Problem
+from auvnav.errors import ConfigError, DiveFormatError, Problem
 from auvnav.frames import FloatArray, angle_diff, wrap_angle
 from auvnav.nav.inputs import declination
+from auvnav.streams import Field, read_table
 from auvnav.trajectory import read_trajectory
 
 TRUTH_DIR = Path("truth")
@@ -64,7 +73,11 @@ def _true_hard_iron_nT(dive_path: Path) -> tuple[FloatArray, float] | None:
 
 
 def calibrate_dive(
-    dive_path: Path, *, method: CalibrationMethod = "levelled", field_model: bool = True
+    dive_path: Path,
+    *,
+    method: CalibrationMethod = "levelled",
+    field_model: bool = True,
+    model: ModelChoice = "auto",
 ) -> dict[str, Any]:
     """Calibrate a dive's magnetometer and score the heading it gives.
 
@@ -79,6 +92,8 @@ def calibrate_dive(
         Reference the vertical to the geomagnetic model's inclination at the dive's origin and
         start (``field_model`` in the summary names the model). Without it a levelled fit leaves
         the vertical offset at zero (e.g. at a site with a known magnetic anomaly).
+    model : {"auto", "wmm", "igrf"}
+        The geomagnetic model (:func:`auvnav.compass.field.earth_field`).
 
     Returns
     -------
@@ -102,6 +117,7 @@ def calibrate_dive(
     """
     dive_path = Path(dive_path)
     dive = read_dive(dive_path)
+    model_choice = model
     mag = dive.magnetometer
     if mag is None:
         raise DiveFormatError(
@@ -118,7 +134,9 @@ def calibrate_dive(
     model = None
     if field_model:
         origin = dive.info.origin
-        model = earth_field(origin.latitude_rad, origin.longitude_rad, dive.info.start_time_s)
+        model = earth_field(
+            origin.latitude_rad, origin.longitude_rad, dive.info.start_time_s, model=model_choice
+        )
     cal = calibrate_magnetometer(
         mag.m_body,
         pitch,
@@ -203,4 +221,136 @@ def format_calibration(summary: dict[str, Any]) -> str:
                 + ", ".join("n/a" if v is None else f"{v:+.3f}%" for v in truth["hard_iron_error_pct"])
                 + " of the field"
             )
+    return "\n".join(lines)
+
+
+DEG = math.pi / 180.0
+SampleMethod = Literal["auto", "general", "ellipsoid", "levelled"]
+
+
+def _sample_fields(columns: tuple[str, str, str]) -> tuple[Field, ...]:
+    return (
+        Field("m", columns),
+        Field("pitch_rad", ("pitch_deg",), DEG, required=False),
+        Field("roll_rad", ("roll_deg",), DEG, required=False),
+    )
+
+
+def read_samples(path: Path) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+    """Magnetometer samples (N, 3) and, when the file has them, pitch and roll (radians)."""
+    path = Path(path)
+    header = ""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            for line in fh:
+                if line.strip() and not line.lstrip().startswith("#"):
+                    header = line
+                    break
+    except (OSError, UnicodeDecodeError):
+        pass  # read_table says why
+    names = [c.strip() for c in header.split(",")]
+    columns = ("mx", "my", "mz") if "mx" in names else ("x", "y", "z")
+    values, problems, _warnings = read_table(path, _sample_fields(columns), str(path), time_ordered=False)
+    if problems:
+        raise DiveFormatError(problems)
+    m = np.column_stack([values[c] for c in columns]).astype(float)
+    if ("pitch_deg" in values) != ("roll_deg" in values):
+        raise ConfigError(f"{path}: give both pitch_deg and roll_deg, or neither")
+    if "pitch_deg" in values:
+        return m, np.asarray(values["pitch_deg"], float) * DEG, np.asarray(values["roll_deg"], float) * DEG
+    return m, None, None
+
+
+def calibrate_samples(
+    path: Path,
+    *,
+    method: SampleMethod = "auto",
+    site: tuple[float, float, float] | None = None,
+    model: ModelChoice = "auto",
+) -> dict[str, Any]:
+    """Calibrate raw magnetometer samples from a CSV (the module's notes).
+
+    Parameters
+    ----------
+    path : Path
+        CSV with ``x, y, z`` (or ``mx, my, mz``), any one unit; optionally ``pitch_deg, roll_deg``.
+    method : {"auto", "general", "ellipsoid", "levelled"}
+        ``auto``: ``general`` without attitude, ``ellipsoid`` with it.
+    site : (latitude_rad, longitude_rad, time_s), optional
+        Where and when: the field model's inclination references the vertical (needs attitude).
+    model : {"auto", "wmm", "igrf"}
+
+    Returns
+    -------
+    dict
+        :meth:`MagnetometerCalibration.summary` plus ``samples``, ``attitude`` (whether the file had
+        it), ``field_model`` (or None), ``field_unit`` (mean calibrated magnitude, the samples' unit)
+        and ``notes``.
+
+    Raises
+    ------
+    DiveFormatError
+        The file is not a readable CSV of samples (every problem, with row and column).
+    ConfigError
+        A method that needs attitude on samples without it.
+    InsufficientDataError
+        Degenerate samples; the message says what is missing.
+    """
+    m, pitch, roll = read_samples(Path(path))
+    notes: list[str] = []
+    attitude = pitch is not None
+    if method == "auto":
+        method = "ellipsoid" if attitude else "general"
+    if not attitude and method in ("ellipsoid", "levelled"):
+        raise ConfigError(f"{path}: the {method} calibration needs pitch_deg and roll_deg columns")
+    field = None
+    if site is not None:
+        field = earth_field(site[0], site[1], site[2], model=model)
+        if not attitude or method == "general":
+            notes.append(
+                "the field model's inclination needs pitch and roll to reference the vertical: not used"
+            )
+            field = None
+    cal = calibrate_magnetometer(
+        m,
+        0.0 if pitch is None else pitch,
+        0.0 if roll is None else roll,
+        method=method,  # type: ignore[arg-type]
+        inclination_rad=None if field is None else field.inclination_rad,
+    )
+    unit = float(np.mean(np.linalg.norm(cal.apply(m), axis=1)))
+    return {
+        "samples": str(path),
+        **cal.summary(),
+        "attitude": attitude,
+        "field_model": None if field is None else field.model,
+        "field_unit": unit,
+        "notes": notes,
+    }
+
+
+def format_samples_calibration(summary: dict[str, Any]) -> str:
+    """A short human-readable account of :func:`calibrate_samples`' summary."""
+    h, unit = summary["h_hard_body"], summary["field_unit"]
+    reference = (
+        ""
+        if summary["field_model"] is None
+        else f", vertical referenced to {summary['field_model']} (inclination {summary['inclination_deg']:+.2f} deg)"
+    )
+    lines = [
+        f"{summary['samples']}: {summary['method']} calibration of {summary['n_samples']} magnetometer samples"
+        f" ({'with' if summary['attitude'] else 'without'} attitude){reference}",
+        "  hard iron   [{}] ({} of the field)".format(
+            ", ".join(f"{v:.4g}" for v in h), ", ".join(f"{100 * v / unit:+.2f}%" for v in h)
+        ),
+        "  soft iron   " + "; ".join(" ".join(f"{v:+.4f}" for v in row) for row in summary["A_soft"]),
+        f"  field spread {summary['field_spread_before_pct']:.2f}% before, {summary['field_spread_after_pct']:.3f}% after",
+    ]
+    if summary["hard_iron_sigma_pct"] is not None:
+        lines.append(
+            "  hard-iron 1-sigma (formal): "
+            + ", ".join(f"{v:.3f}%" for v in summary["hard_iron_sigma_pct"])
+            + " of the field"
+        )
+    lines.extend(f"  note: {n}" for n in summary["notes"])
     return "\n".join(lines)

@@ -5,7 +5,9 @@ BGS, Chulliat et al., "The US/UK World Magnetic Model for 2020-2025", NOAA Techn
 evaluated by ``pygeomag`` with the coefficient file whose five-year lifespan contains the date
 (WMM-2010, WMM-2015v2, WMM-2020, WMM-2025), and outside every WMM lifespan the International
 Geomagnetic Reference Field (IGRF-14, IAGA Working Group V-MOD, 2024, doi:10.5281/zenodo.14012302)
-evaluated by ``ppigrf``. Both take geodetic coordinates on the WGS84 ellipsoid.
+evaluated by ``ppigrf``. Both take geodetic coordinates on the WGS84 ellipsoid. Either can be asked
+for by name (``model="wmm"`` or ``"igrf"``; ``auvnav compass declination --model``); IGRF-14 is
+checked against the IAGA reference implementation's published test values (BGS pyIGRF).
 
 Conventions (DESIGN section 4): the field is in NED (north, east, down) in tesla; declination is
 east-positive, inclination down-positive; true heading = magnetic heading + declination.
@@ -126,20 +128,34 @@ def _geomag(coefficients_file: str) -> GeoMag:
     return GeoMag(coefficients_file=coefficients_file)
 
 
+ModelChoice = Literal["auto", "wmm", "igrf"]
+
+
 def _field_ned_nT(
-    latitude_deg: float, longitude_deg: float, height_km: float, time_s: float
+    latitude_deg: float, longitude_deg: float, height_km: float, time_s: float, model: ModelChoice = "auto"
 ) -> tuple[FloatArray, str]:
     """North, east, down field (nT) and the model name."""
     year = posix2decimal_year(time_s)
-    for epoch, coefficients_file in _WMM_FILES:
-        if epoch <= year <= epoch + _WMM_LIFESPAN_YEARS:
-            geomag = _geomag(coefficients_file)
-            r = geomag.calculate(glat=latitude_deg, glon=longitude_deg, alt=height_km, time=year)
-            return np.array([r.x, r.y, r.z]), geomag.model.replace("-", "")
+    if model in ("auto", "wmm"):
+        for epoch, coefficients_file in _WMM_FILES:
+            if epoch <= year <= epoch + _WMM_LIFESPAN_YEARS:
+                geomag = _geomag(coefficients_file)
+                r = geomag.calculate(glat=latitude_deg, glon=longitude_deg, alt=height_km, time=year)
+                return np.array([r.x, r.y, r.z]), geomag.model.replace("-", "")
+        if model == "wmm":
+            first, last = _WMM_FILES[-1][0], _WMM_FILES[0][0] + _WMM_LIFESPAN_YEARS
+            raise GeomagneticModelError(
+                f"the WMM does not cover {year:.3f} (WMM covers {first:.1f}-{last:.1f}): use the IGRF "
+                f"(model igrf, IGRF-14 {_IGRF_FIRST_YEAR:.0f}-{_IGRF_LAST_YEAR:.0f})"
+            )
     if _IGRF_FIRST_YEAR <= year <= _IGRF_LAST_YEAR:
         date = dt.datetime.fromtimestamp(time_s, tz=dt.timezone.utc).replace(tzinfo=None)
         be, bn, bu = ppigrf.igrf(longitude_deg, latitude_deg, height_km, date)
         return np.array([bn.item(), be.item(), -bu.item()]), _IGRF_NAME
+    if model == "igrf":
+        raise GeomagneticModelError(
+            f"IGRF-14 does not cover {year:.3f} (it covers {_IGRF_FIRST_YEAR:.0f}-{_IGRF_LAST_YEAR:.0f})"
+        )
     raise GeomagneticModelError(
         f"no geomagnetic model covers {year:.3f}: WMM covers 2010.0-2030.0 and IGRF-14 "
         f"{_IGRF_FIRST_YEAR:.0f}-{_IGRF_LAST_YEAR:.0f}"
@@ -147,12 +163,18 @@ def _field_ned_nT(
 
 
 def earth_field(
-    latitude_rad: float, longitude_rad: float, time_s: float, *, height_m: float = 0.0
+    latitude_rad: float,
+    longitude_rad: float,
+    time_s: float,
+    *,
+    height_m: float = 0.0,
+    model: ModelChoice = "auto",
 ) -> EarthField:
     """The geomagnetic field at a place and time.
 
-    Uses the WMM whose five-year lifespan contains the date (the newest where two lifespans meet),
-    else IGRF-14 (1900-2030). The model used is named in the result.
+    With ``model="auto"`` (the default) the WMM whose five-year lifespan contains the date (the
+    newest where two lifespans meet), else IGRF-14 (1900-2030); ``"wmm"`` and ``"igrf"`` ask for one
+    model and are an error outside its span. The model used is named in the result.
 
     Parameters
     ----------
@@ -162,6 +184,7 @@ def earth_field(
         Seconds since the POSIX epoch, UTC.
     height_m : float, optional
         Height above the WGS84 ellipsoid, metres (negative below it).
+    model : {"auto", "wmm", "igrf"}, optional
 
     Returns
     -------
@@ -170,18 +193,21 @@ def earth_field(
     Raises
     ------
     GeomagneticModelError
-        The date lies outside 1900-2030, or the latitude outside [-90, 90] degrees.
+        The date lies outside the model's span (1900-2030 for ``auto``), or the latitude outside
+        [-90, 90] degrees.
     """
+    if model not in ("auto", "wmm", "igrf"):
+        raise ValueError(f"model must be 'auto', 'wmm' or 'igrf'; found {model!r}")
     latitude_deg, longitude_deg = math.degrees(latitude_rad), math.degrees(longitude_rad)
     if not -90.0 <= latitude_deg <= 90.0:
         raise GeomagneticModelError(f"latitude {latitude_deg:g} deg is outside [-90, 90]")
     longitude_deg = (longitude_deg + 180.0) % 360.0 - 180.0
-    b_nT, model = _field_ned_nT(latitude_deg, longitude_deg, height_m / 1000.0, time_s)
+    b_nT, name = _field_ned_nT(latitude_deg, longitude_deg, height_m / 1000.0, time_s, model)
     return EarthField(
         b_ned_T=b_nT / NT_PER_T,
         declination_rad=math.atan2(b_nT[1], b_nT[0]),
         inclination_rad=math.atan2(b_nT[2], math.hypot(b_nT[0], b_nT[1])),
-        model=model,
+        model=name,
     )
 
 

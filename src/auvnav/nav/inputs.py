@@ -46,8 +46,10 @@ log = logging.getLogger(__name__)
 
 #: A hole in the DVL log longer than this many median periods is filled with bridged samples.
 DVL_HOLE_PERIODS = 1.5
-#: Attitude gaps longer than this are reported (the attitude is interpolated across them), seconds.
-ATTITUDE_GAP_S = 5.0
+#: Gaps in a stream longer than this many of its own median sample periods are reported (the
+#: attitude is interpolated across them): relative to each stream's rate, so a log sampled every 8 s
+#: is not a gap at every sample (dive validation uses the same factor).
+GAP_PERIODS = 5.0
 #: GPS fixes closer together than this belong to one stay at the surface; further apart, they bound
 #: a sub-sea leg, seconds (GPS gives a fix a second at the surface and none below it).
 SURFACE_GAP_S = 60.0
@@ -360,12 +362,15 @@ def nav_inputs(dive: Dive, correction: HeadingCorrection | None = None) -> NavIn
 
     # Attitude: the compass heading, corrected (eq. 5), to true north, then the compass mount removed.
     gaps = np.diff(att.t_s[(att.t_s >= t0) & (att.t_s <= t1)])
-    if np.any(gaps > ATTITUDE_GAP_S):
+    limit = GAP_PERIODS * float(np.median(gaps)) if gaps.size else np.inf
+    if np.any(gaps > limit):
         log.warning(
-            "%s/nav/attitude: %d gap(s) longer than %g s (the longest %.1f s); the attitude is interpolated",
+            "%s/nav/attitude: %d gap(s) longer than %g median periods (%.3g s), the longest %.1f s; "
+            "the attitude is interpolated",
             name,
-            np.count_nonzero(gaps > ATTITUDE_GAP_S),
-            ATTITUDE_GAP_S,
+            np.count_nonzero(gaps > limit),
+            GAP_PERIODS,
+            limit,
             gaps.max(),
         )
     compass_heading = _interp_angle(t, att.t_s, att.heading_rad)

@@ -281,14 +281,24 @@ def marginals(solution: SlamSolution, every: int = 1) -> PoseMarginals:
     sig_p = np.empty((len(rows), 3))
     sig_y = np.empty(len(rows))
     for n, k in enumerate(rows):
-        C = m.marginalCovariance(pose_key(int(k)))
+        C = _marginal_covariance(m, pose_key(int(k)))
         R = solution.T_ned_body[k, :3, :3]
         sig_p[n] = np.sqrt(np.diag(R @ C[3:, 3:] @ R.T))
         sig_y[n] = math.sqrt((R @ C[:3, :3] @ R.T)[2, 2])
     t = sg.times.t_s
     sigma_ned = np.stack([np.interp(t, t[rows], sig_p[:, c]) for c in range(3)], -1)
-    cov_x = m.marginalCovariance(COEFFICIENTS_KEY) if sg.compass.estimate else None
+    cov_x = _marginal_covariance(m, COEFFICIENTS_KEY) if sg.compass.estimate else None
     return PoseMarginals(sigma_ned, np.interp(t, t[rows], sig_y), cov_x, len(rows))
+
+
+def _marginal_covariance(tree: gtsam.GaussianBayesTree, key: int) -> FloatArray:
+    """A variable's marginal covariance from the Bayes tree, its marginal factor eliminated by QR too
+    (``marginalCovariance`` re-eliminates by Cholesky, which calls a 25-minute cut of the check dive
+    indeterminate at a pose in a DVL dropout)."""
+    try:
+        return np.linalg.inv(tree.marginalFactor(key, gtsam.EliminateQR).information())
+    except (RuntimeError, np.linalg.LinAlgError) as err:
+        raise PoseGraphSolveError(f"marginals failed at {gtsam.DefaultKeyFormatter(key)}: {_one_line(err)}") from None
 
 
 def solution_trajectory(solution: SlamSolution, sigmas: PoseMarginals | None) -> Trajectory:

@@ -332,14 +332,44 @@ def _map(
 # ---------------------------------------------------------------------------------------------
 
 
-def image_altitude(dive: Dive, t_s: FloatArray) -> FloatArray:
-    """DVL altitude at the image times (valid samples interpolated), metres."""
-    if dive.dvl.altitude_m is None:
-        raise InsufficientDataError("nav/dvl: no altitude_m column; cannot place image footprints")
-    ok = dive.dvl.valid & np.isfinite(dive.dvl.altitude_m) & (dive.dvl.altitude_m > 0)
-    if ok.sum() < 2:
-        raise InsufficientDataError("nav/dvl: fewer than two valid altitudes; cannot place image footprints")
-    return np.interp(t_s, dive.dvl.t_s[ok], dive.dvl.altitude_m[ok])
+def dvl_altitude_available(dive: Dive) -> bool:
+    """Whether the DVL log has at least two valid altitudes (a real log may have none)."""
+    alt = dive.dvl.altitude_m
+    if alt is None:
+        return False
+    return int(np.count_nonzero(dive.dvl.valid & np.isfinite(alt) & (alt > 0))) >= 2
+
+
+def stereo_altitude(files: list[str], rig: StereoRig, R_ned_body: FloatArray) -> FloatArray:
+    """Altitude of each stereo pair from its own triangulated points, metres (NaN without points).
+
+    The median, over the pair's points, of their depth below the body origin (the points moved into
+    the body frame with the rig's mount and levelled with the prior's attitude): the stereo range to
+    the seafloor, used for footprints when the DVL log has no altitude.
+    """
+    T_bc = T_body_cam(rig)
+    out = np.full(len(files), np.nan)
+    for k, (path, R) in enumerate(zip(files, R_ned_body, strict=True)):
+        p = _load(path).p_cam_m
+        if len(p):
+            out[k] = float(np.median((p @ T_bc[:3, :3].T + T_bc[:3, 3]) @ R[2]))
+    return out
+
+
+def image_altitude(
+    dive: Dive, t_s: FloatArray, *, stereo: tuple[FloatArray, FloatArray] | None = None
+) -> FloatArray:
+    """Altitude at the image times, metres: the DVL's (valid samples interpolated) or, when the DVL
+    log has none, ``stereo`` (times and altitudes, :func:`stereo_altitude`) interpolated."""
+    if dvl_altitude_available(dive):
+        ok = dive.dvl.valid & np.isfinite(dive.dvl.altitude_m) & (dive.dvl.altitude_m > 0)  # type: ignore[operator]
+        return np.interp(t_s, dive.dvl.t_s[ok], dive.dvl.altitude_m[ok])  # type: ignore[index]
+    if stereo is not None and len(stereo[0]) >= 2:
+        return np.interp(t_s, stereo[0], stereo[1])
+    what = "no altitude_m column" if dive.dvl.altitude_m is None else "fewer than two valid altitudes"
+    raise InsufficientDataError(
+        f"nav/dvl: {what}; cannot place image footprints (the loop stage falls back to the stereo range)"
+    )
 
 
 @lru_cache(maxsize=4)
@@ -437,7 +467,22 @@ def find_loops(
     verified = _read_verified(verify_dir)
     salt = _verification_salt(settings, ctx.vocabulary)
     pri = prior.interpolate(t[usable])
-    fp_u = footprints(pri, image_altitude(dive, t[usable]), rig)
+    stereo = None
+    if not dvl_altitude_available(dive):
+        what = "no altitude_m column" if dive.dvl.altitude_m is None else "fewer than two valid altitudes"
+        log.warning(
+            "nav/dvl: %s: loop closures need the altitude to place the image footprints; using the "
+            "stereo range instead (each pair's median point depth)",
+            what,
+        )
+        ranges = stereo_altitude([files[int(k)] for k in usable], rig, pri.R_ned_body)
+        ok = np.isfinite(ranges) & (ranges > 0)
+        if ok.sum() < 2:
+            raise InsufficientDataError(
+                f"nav/dvl: {what}, and fewer than two stereo pairs give a range: cannot place image footprints"
+            )
+        stereo = (pri.t_s[ok], ranges[ok])
+    fp_u = footprints(pri, image_altitude(dive, t[usable], stereo=stereo), rig)
     speed = float(np.median(np.linalg.norm(np.diff(pri.p_ned_m[:, :2], axis=0), axis=1) / np.diff(pri.t_s)))
     drift = DriftModel(pri.t_s, speed, settings.candidates)
     # Work in positions within `usable` (u) and map back to image rows at the end.
@@ -501,6 +546,7 @@ def find_loops(
         "features_s": t_features,
         "elapsed_s": elapsed,
         "pairs_per_s": len(usable) / elapsed if elapsed > 0 else float("nan"),
+        "altitude_source": "dvl" if stereo is None else "stereo",
         "settings": json.loads(json.dumps(asdict(settings), default=float)),
     }
     return LoopResult(loops, out, summary)
