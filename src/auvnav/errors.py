@@ -55,11 +55,19 @@ class Problem:
         return f"{where}: {self.message}"
 
 
+#: At most this many problems are printed, one line each; the rest are counted on one more line.
+MAX_PROBLEM_LINES = 12
+
+
 class DiveFormatError(AuvnavError):
-    """A dive folder breaks the format; carries every problem found, one line each."""
+    """A dive folder breaks the format; carries every problem found (:attr:`problems`), and says the
+    first :data:`MAX_PROBLEM_LINES` of them, one line each, with a count of the rest."""
 
     def __init__(self, problems: list[Problem]) -> None:
         if not problems:
             raise ValueError("DiveFormatError needs at least one problem")
         self.problems = list(problems)
-        super().__init__("\n".join(str(p) for p in self.problems))
+        lines = [str(p) for p in self.problems[:MAX_PROBLEM_LINES]]
+        if len(self.problems) > MAX_PROBLEM_LINES:
+            lines.append(f"... and {len(self.problems) - MAX_PROBLEM_LINES} more problems")
+        super().__init__("\n".join(lines))

@@ -67,11 +67,15 @@ class StageContext:
     executor : callable
         Gives the executor for per-item work (made on first use; the pipeline closes it).
     progress : callable(what, done, total), optional
+    allow_outside : bool
+        Files the dive names outside its folder may be read (``--allow-outside``; each is said):
+        give it to :func:`~auvnav.dive.read_dive`.
     """
 
     dive: Path
     executor: Callable[[], Executor]
     progress: Progress | None = None
+    allow_outside: bool = False
 
     def tick(self, what: str, done: int, total: int) -> None:
         if self.progress is not None:
@@ -186,7 +190,10 @@ def _coerce(name: str, tp: Any, value: Any, meta: Mapping[str, Any], base: Path 
         if not isinstance(value, (str, Path)) or not str(value):
             raise ConfigError(f"{name}: expected a file path; found {quote(value)}")
         path = Path(value)
-        return base / path if base is not None and not path.is_absolute() else path
+        path = base / path if base is not None and not path.is_absolute() else path
+        if path.exists() and not (path.is_file() or path.is_dir()):  # a named pipe would block its reader
+            raise ConfigError(f"{name}: {path}: not a regular file")
+        return path
     if kind is str:
         if not isinstance(value, str):
             raise ConfigError(f"{name}: expected text; found {quote(value)}")

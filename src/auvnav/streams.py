@@ -8,6 +8,8 @@ file and reports every problem (file, row, column) instead of guessing; :meth:`S
 
 from __future__ import annotations
 
+import codecs
+import csv
 import dataclasses
 import json
 import logging
@@ -22,6 +24,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from auvnav.config import cut, quote
 from auvnav.errors import DiveFormatError, OutputExistsError, Problem
 
 log = logging.getLogger(__name__)
@@ -34,6 +37,13 @@ os.umask(_UMASK)
 
 #: At most this many rows are named for one kind of problem in one column; the rest are counted.
 MAX_ROWS_NAMED = 5
+#: Longest line of a CSV table, bytes (a stream's row is under 100 bytes, a loop closure's under 1000).
+MAX_LINE_BYTES = 2**16
+#: A Parquet file over 256 MiB uncompressed may expand at most this many times its size.
+MAX_PARQUET_EXPANSION = 100
+_BLOCK_BYTES = 2**20
+#: Largest integer a table's integer column holds exactly (as read through a float).
+MAX_EXACT_INT = 2**53
 
 
 @dataclass(frozen=True)
@@ -181,37 +191,131 @@ class Stream:
         )
 
 
+def _scan_text(path: Path, display: str) -> list[Problem]:
+    """Check a CSV file block by block before it is parsed: text (no NUL byte, UTF-8) and no line
+    longer than :data:`MAX_LINE_BYTES`, so that neither a binary file nor one huge field is ever
+    held in memory whole."""
+    decoder = codecs.getincrementaldecoder("utf-8")()
+    offset = 0  # bytes read before this block
+    line_start = 0  # offset of the current line's first byte
+    line_no = 1
+    with path.open("rb") as fh:
+        while block := fh.read(_BLOCK_BYTES):
+            if b"\x00" in block:
+                return [Problem(display, "not a CSV text file (binary content)")]
+            try:
+                decoder.decode(block)
+            except UnicodeDecodeError as err:
+                return [Problem(display, f"not a CSV text file (not UTF-8 at byte {offset + err.start})")]
+            ends = np.flatnonzero(np.frombuffer(block, dtype=np.uint8) == 10) + offset
+            starts = np.concatenate([[line_start], ends[:-1] + 1]) if ends.size else np.array([line_start])
+            lengths = (ends - starts[: ends.size]) if ends.size else np.zeros(0, dtype=np.int64)
+            too_long = np.flatnonzero(lengths > MAX_LINE_BYTES)
+            if too_long.size:
+                k = int(too_long[0])
+                return [_long_line(display, line_no + k)]
+            if ends.size:
+                line_no += ends.size
+                line_start = int(ends[-1]) + 1
+            offset += len(block)
+            if offset - line_start > MAX_LINE_BYTES:
+                return [_long_line(display, line_no)]
+        try:
+            decoder.decode(b"", final=True)
+        except UnicodeDecodeError:
+            return [Problem(display, f"not a CSV text file (not UTF-8 at byte {offset})")]
+    return []
+
+
+def _long_line(display: str, line_no: int) -> Problem:
+    return Problem(
+        display,
+        f"line {line_no} is longer than the {MAX_LINE_BYTES} bytes a table's line may have "
+        "(a broken line, or a field that is not a value?)",
+    )
+
+
+def _duplicate_columns(path: Path) -> list[str]:
+    """Column names the CSV header gives more than once (pandas would rename them ``x.1``)."""
+    with path.open("r", encoding="utf-8-sig", newline="") as fh:
+        for line in fh:
+            if line.strip() and not line.lstrip().startswith("#"):
+                names = [c.strip() for c in next(csv.reader([line.split("#")[0]]), [])]
+                return sorted({c for c in names if names.count(c) > 1})
+    return []
+
+
+def _read_parquet(path: Path, display: str) -> tuple[pd.DataFrame | None, list[Problem]]:
+    """A Parquet file as a frame, refusing one that would decompress to more than
+    :data:`MAX_PARQUET_EXPANSION` times its size (and over 256 MiB)."""
+    import pyarrow.parquet as pq
+
+    try:
+        meta = pq.ParquetFile(path).metadata
+        names = meta.schema.names
+        dup = sorted({c for c in names if names.count(c) > 1})
+        if dup:
+            return None, [Problem(display, f"column {quote(dup[0])} appears twice (one column per name)")]
+        size = sum(meta.row_group(i).total_byte_size for i in range(meta.num_row_groups))
+        if size > 2**28 and size > MAX_PARQUET_EXPANSION * max(path.stat().st_size, 1):
+            return None, [
+                Problem(display, f"decompresses to {size} bytes from {path.stat().st_size}: not read")
+            ]
+        return pd.read_parquet(path), []
+    except MemoryError:
+        return None, [Problem(display, "not a readable Parquet file (too large to read)")]
+    except Exception as err:  # pyarrow raises many kinds (ArrowInvalid, OSError, TypeError, ...)
+        return None, [Problem(display, f"not a readable Parquet file ({_first_line(err)})")]
+
+
+def _first_line(err: BaseException) -> str:
+    text = str(err).strip()
+    return cut(text.splitlines()[0]) if text else type(err).__name__
+
+
 def _read_raw(path: Path, display: str) -> tuple[pd.DataFrame | None, list[Problem]]:
     """Read a CSV or Parquet file as strings/numbers without interpretation."""
     suffix = path.suffix.lower()
-    try:
-        if suffix == ".parquet":
-            return pd.read_parquet(path), []
-        raw = path.read_bytes()
-        if b"\x00" in raw[:65536]:
-            return None, [Problem(display, "not a CSV text file (binary content)")]
+    if not path.is_file():
+        what = "a folder" if path.is_dir() else "not found" if not path.exists() else "not a regular file"
+        return None, [Problem(display, f"not a table file ({what})" if what != "not found" else what)]
+    if suffix == ".parquet":
+        frame, problems = _read_parquet(path, display)
+        if frame is None:
+            return None, problems
+    else:
         try:
-            raw.decode("utf-8")
-        except UnicodeDecodeError as err:
-            return None, [Problem(display, f"not a CSV text file (not UTF-8 at byte {err.start})")]
-        frame = pd.read_csv(path, comment="#", skipinitialspace=True, dtype=str, keep_default_na=False)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, ValueError, OSError) as err:
-        kind = "Parquet" if suffix == ".parquet" else "CSV"
-        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-        return None, [Problem(display, f"not a readable {kind} file ({first})")]
+            problems = _scan_text(path, display)
+            if problems:
+                return None, problems
+            dup = _duplicate_columns(path)
+            if dup:
+                return None, [Problem(display, f"column {quote(dup[0])} appears twice (one column per name)")]
+            frame = pd.read_csv(path, comment="#", skipinitialspace=True, dtype=str, keep_default_na=False)
+        except (pd.errors.ParserError, pd.errors.EmptyDataError, ValueError, OSError, csv.Error) as err:
+            return None, [Problem(display, f"not a readable CSV file ({_first_line(err)})")]
     frame.columns = [str(c).strip() for c in frame.columns]
+    dup = sorted({c for c in frame.columns if list(frame.columns).count(c) > 1})
+    if dup:
+        return None, [Problem(display, f"column {quote(dup[0])} appears twice (one column per name)")]
     return frame, []
 
 
 def flag_rows(
     mask: NDArray[np.bool_], display: str, column: str | None, describe: Callable[[int], str], more: str
 ) -> list[Problem]:
-    """One problem per flagged row for the first few rows (1-based), then a count of the rest."""
+    """One problem for the flagged rows (1-based): the first row's, with the count and the next few
+    rows of the rest, so that one kind of problem in one column is one line however many rows have
+    it (``more`` names the kind in the plural)."""
     idx = np.flatnonzero(mask)
-    problems = [Problem(display, describe(int(i) + 1), int(i) + 1, column) for i in idx[:MAX_ROWS_NAMED]]
-    if idx.size > MAX_ROWS_NAMED:
-        problems.append(Problem(display, f"{idx.size - MAX_ROWS_NAMED} more {more}", None, column))
-    return problems
+    if not idx.size:
+        return []
+    message = describe(int(idx[0]) + 1)
+    if idx.size > 1:
+        named = ", ".join(str(int(i) + 1) for i in idx[1:MAX_ROWS_NAMED])
+        rest = f" and {idx.size - MAX_ROWS_NAMED} more" if idx.size > MAX_ROWS_NAMED else ""
+        message += f" (and {idx.size - 1} more {more}: rows {named}{rest})"
+    return [Problem(display, message, int(idx[0]) + 1, column)]
 
 
 def _parse_column(series: pd.Series, kind: Kind, display: str, column: str) -> tuple[NDArray, list[Problem]]:
@@ -227,10 +331,10 @@ def _parse_column(series: pd.Series, kind: Kind, display: str, column: str) -> t
             bad,
             display,
             column,
-            lambda r: f"not a boolean ({series.iloc[r - 1]!r}; use 1/0)",
+            lambda r: f"not a boolean ({quote(series.iloc[r - 1])}; use 1/0)",
             "non-boolean values",
         )
-        return text.map(mapping).fillna(False).to_numpy(dtype=bool), problems
+        return text.isin([k for k, v in mapping.items() if v]).to_numpy(dtype=bool), problems
     if series.dtype.kind in "fiub":
         values = series.to_numpy(dtype=float)
         bad_number = np.zeros(len(values), dtype=bool)
@@ -244,7 +348,7 @@ def _parse_column(series: pd.Series, kind: Kind, display: str, column: str) -> t
         bad_number,
         display,
         column,
-        lambda r: f"not a number ({series.iloc[r - 1]!r})",
+        lambda r: f"not a number ({quote(series.iloc[r - 1])})",
         "values that are not numbers",
     )
     problems += flag_rows(
@@ -254,6 +358,10 @@ def _parse_column(series: pd.Series, kind: Kind, display: str, column: str) -> t
         fractional = np.isfinite(values) & (values != np.round(values))
         problems += flag_rows(
             fractional, display, column, lambda r: f"not an integer ({values[r - 1]!r})", "non-integers"
+        )
+        huge = np.isfinite(values) & ~fractional & (np.abs(values) > MAX_EXACT_INT)
+        problems += flag_rows(
+            huge, display, column, lambda r: f"integer out of range ({values[r - 1]:g})", "huge integers"
         )
     return values, problems
 
@@ -293,15 +401,22 @@ def read_table(
     if frame is None:
         return {}, problems, []
     known = {c for f in fields for c in f.columns}
-    warnings = [f"{display}: unknown column {c!r} ignored" for c in frame.columns if c not in known]
+    unknown = [c for c in frame.columns if c not in known]
+    warnings = []
+    names = ", ".join(quote(c) for c in unknown[:MAX_ROWS_NAMED])
+    if len(unknown) > MAX_ROWS_NAMED:
+        names += f" and {len(unknown) - MAX_ROWS_NAMED} more"
+    if unknown:
+        warnings.append(f"{display}: unknown column{'s' if len(unknown) > 1 else ''} {names} ignored")
     for f in fields:
         for c in f.columns:
             if f.required and c not in frame.columns:
-                problems.append(Problem(display, "missing required column", None, c))
+                hint = f" (the file has {names} instead?)" if unknown else ""
+                problems.append(Problem(display, f"missing required column{hint}", None, c))
     if problems:
-        return {}, problems, warnings
+        return {}, problems, []
     if len(frame) == 0:
-        return {}, [Problem(display, "no data rows")], warnings
+        return {}, [Problem(display, "no data rows")], []
     values: dict[str, NDArray] = {}
     for f in fields:
         for c in f.columns:
@@ -316,7 +431,7 @@ def read_table(
     time_col = fields[0].columns[0]
     if time_ordered and time_col in values and not any(p.column == time_col for p in problems):
         problems += _check_time(values[time_col], display, time_col)
-    return (values if not problems else {}), problems, warnings
+    return (values, problems, warnings) if not problems else ({}, problems, [])
 
 
 def read_stream(cls: type[S], path: Path, display: str | None = None) -> S:

@@ -16,15 +16,18 @@ series datasheet; 0.1 dbar for a 1000 dbar rating).
 
 from __future__ import annotations
 
+import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, model_validator
+from pydantic import Field as PydanticField
 
-from auvnav.config import dump_yaml, load_yaml, pydantic_problems
+from auvnav.config import MAX_BYTES, dump_yaml, load_yaml, parse_yaml, pydantic_problems, quote, read_text
 from auvnav.errors import ConfigError, Problem
 from auvnav.frames import euler2rot, is_rotation, rot2euler
 
@@ -90,13 +93,22 @@ class CameraModel:
     D: FloatArray = field(default_factory=lambda: np.zeros(5))
 
     def __post_init__(self) -> None:
-        if self.width <= 0 or self.height <= 0:
+        if not (0 < self.width <= MAX_IMAGE_PX and 0 < self.height <= MAX_IMAGE_PX):
             raise ValueError(f"image size must be positive; found {self.width}x{self.height}")
         K = np.asarray(self.K)
-        if K.shape != (3, 3) or K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]):
+        if (
+            K.shape != (3, 3)
+            or not np.all(np.isfinite(K))
+            or K[0, 0] <= 0
+            or K[1, 1] <= 0
+            or not np.allclose(K[2], [0, 0, 1])
+        ):
             raise ValueError(
-                f"K must be a 3x3 intrinsic matrix with positive focal lengths; found {K.tolist()}"
+                f"K must be a 3x3 intrinsic matrix with positive focal lengths; found {quote(K.tolist())}"
             )
+        D = np.asarray(self.D)
+        if D.ndim != 1 or D.size not in (4, 5, 8, 12, 14) or not np.all(np.isfinite(D)):
+            raise ValueError(f"D must hold 4, 5, 8, 12 or 14 finite coefficients; found {quote(D.tolist())}")
 
     @property
     def hfov_rad(self) -> float:
@@ -130,8 +142,21 @@ class StereoRig:
     def __post_init__(self) -> None:
         if not is_rotation(self.R_right_left):
             raise ValueError("R_right_left is not a rotation")
-        if np.shape(self.t_right_left_m) != (3,) or np.linalg.norm(self.t_right_left_m) <= 0:
-            raise ValueError(f"t_right_left_m must be a non-zero 3-vector; found {self.t_right_left_m!r}")
+        t = np.asarray(self.t_right_left_m, dtype=float)
+        if t.shape != (3,) or not np.all(np.isfinite(t)) or np.linalg.norm(t) <= 0:
+            raise ValueError(f"t_right_left_m must be a non-zero 3-vector; found {quote(t.tolist())}")
+        if (self.left.width, self.left.height) != (self.right.width, self.right.height):
+            raise ValueError(
+                f"left and right image sizes differ ({self.left.width}x{self.left.height} and "
+                f"{self.right.width}x{self.right.height})"
+            )
+        # The rectification (OpenCV stereoRectify) needs the right camera to the right of the left.
+        centre = -np.asarray(self.R_right_left, dtype=float).T @ t  # right camera centre, left frame
+        if not centre[0] > abs(centre[1]):
+            raise ValueError(
+                f"the right camera is not to the right of the left one (its centre is at "
+                f"{np.round(centre, 4).tolist()} m in the left camera's frame): left and right swapped?"
+            )
 
     @property
     def baseline_m(self) -> float:
@@ -164,7 +189,15 @@ class Vehicle:
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+#: A noise figure: positive and finite (the filter and the graph divide by it).
+Sigma = Annotated[float, PydanticField(gt=0)]
+#: Largest lever arm accepted, metres (a vehicle is a few metres long).
+MAX_LEVER_ARM_M = 100.0
+#: Largest image side accepted, pixels.
+MAX_IMAGE_PX = 100_000
 
 
 def _vec3(v: list[float]) -> list[float]:
@@ -178,7 +211,13 @@ class _MountFile(_Strict):
     rpy_deg: list[float] | None = None
     lever_arm_m: list[float] = [0.0, 0.0, 0.0]
 
-    _lever = field_validator("lever_arm_m")(_vec3)
+    @field_validator("lever_arm_m")
+    @classmethod
+    def _lever(cls, v: list[float]) -> list[float]:
+        _vec3(v)
+        if max(abs(x) for x in v) > MAX_LEVER_ARM_M:
+            raise ValueError(f"a lever arm is at most {MAX_LEVER_ARM_M:g} m; found {v}")
+        return v
 
     @model_validator(mode="after")
     def _rotation(self) -> _MountFile:
@@ -203,36 +242,36 @@ class _MountFile(_Strict):
 
 class _DvlFile(_Strict):
     mount: _MountFile = _MountFile()
-    velocity_sigma_mps: float = DEFAULT_DVL_VELOCITY_SIGMA_MPS
-    scale_sigma: float = DEFAULT_DVL_SCALE_SIGMA
-    max_altitude_m: float = DEFAULT_DVL_MAX_ALTITUDE_M
+    velocity_sigma_mps: Sigma = DEFAULT_DVL_VELOCITY_SIGMA_MPS
+    scale_sigma: Sigma = DEFAULT_DVL_SCALE_SIGMA
+    max_altitude_m: Sigma = DEFAULT_DVL_MAX_ALTITUDE_M
 
 
 class _CompassFile(_Strict):
     mount: _MountFile = _MountFile()
-    heading_sigma_deg: float = DEFAULT_HEADING_SIGMA_DEG
-    pitch_roll_sigma_deg: float = DEFAULT_PITCH_ROLL_SIGMA_DEG
+    heading_sigma_deg: Annotated[float, PydanticField(gt=0, le=180)] = DEFAULT_HEADING_SIGMA_DEG
+    pitch_roll_sigma_deg: Annotated[float, PydanticField(gt=0, le=90)] = DEFAULT_PITCH_ROLL_SIGMA_DEG
 
 
 class _PressureSensorFile(_Strict):
     mount: _MountFile = _MountFile()
-    sigma_dbar: float = DEFAULT_PRESSURE_SIGMA_DBAR
+    sigma_dbar: Sigma = DEFAULT_PRESSURE_SIGMA_DBAR
 
 
 class _GpsFile(_Strict):
     mount: _MountFile = _MountFile()
-    sigma_m: float = DEFAULT_GPS_SIGMA_M
+    sigma_m: Sigma = DEFAULT_GPS_SIGMA_M
 
 
 class _UsblFile(_Strict):
-    sigma_m: float = DEFAULT_USBL_SIGMA_M
+    sigma_m: Sigma = DEFAULT_USBL_SIGMA_M
 
 
 class _CameraFile(_Strict):
-    width: int
-    height: int
+    width: Annotated[int, PydanticField(gt=0, le=MAX_IMAGE_PX)]
+    height: Annotated[int, PydanticField(gt=0, le=MAX_IMAGE_PX)]
     K: list[list[float]]
-    D: list[float] = [0.0, 0.0, 0.0, 0.0, 0.0]
+    D: list[float] = PydanticField(default=[0.0, 0.0, 0.0, 0.0, 0.0], max_length=14)
 
 
 class _StereoFile(_Strict):
@@ -270,50 +309,169 @@ def _camera(c: _CameraFile) -> CameraModel:
     return CameraModel(c.width, c.height, np.asarray(c.K, dtype=float), np.asarray(c.D, dtype=float))
 
 
+def _calibration_file(path: Path) -> None:
+    """Raise ConfigError unless ``path`` is a regular file of at most :data:`MAX_BYTES` (a named pipe
+    would block OpenCV for ever)."""
+    try:
+        if not path.exists():
+            raise ConfigError(f"{path}: calibration file not found")
+        if not path.is_file():
+            raise ConfigError(f"{path}: not a regular file")
+        if path.stat().st_size > MAX_BYTES:
+            raise ConfigError(f"{path}: too large for a calibration ({path.stat().st_size} bytes)")
+    except OSError as err:
+        raise ConfigError(f"{path}: cannot be read ({err.strerror or type(err).__name__})") from None
+
+
 def read_opencv_stereo(path: Path) -> tuple[CameraModel, CameraModel, FloatArray, FloatArray]:
-    """Read an OpenCV ``FileStorage`` stereo calibration (YAML or XML).
+    """Read an OpenCV ``FileStorage`` stereo calibration (YAML, JSON or XML).
 
     Accepts the names OpenCV's samples and ``stereoCalibrate`` users write: ``K1``/``M1``/
     ``cameraMatrix1``, ``D1``/``distCoeffs1`` (and 2), ``R``, ``T``, and the image size as
     ``image_width``/``image_height`` or ``imageSize``. ``T`` is in metres.
-    """
-    import cv2
 
-    if not path.is_file():
-        raise ConfigError(f"{path}: calibration file not found")
-    try:
-        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    except cv2.error as err:
-        raise ConfigError(
-            f"{path}: not an OpenCV FileStorage file ({str(err).strip().splitlines()[-1]})"
-        ) from err
-    if not fs.isOpened():
-        raise ConfigError(f"{path}: not an OpenCV FileStorage file")
+    The file is parsed here (the strict YAML loader, or the standard library's XML parser with no
+    document type), not by OpenCV: ``cv2.FileStorage`` corrupts its heap and aborts the process on
+    some malformed files (found by ``tests/test_fuzz.py``).
+    """
+    path = Path(path)
+    _calibration_file(path)
+    doc = _opencv_document(path)
 
     def mat(*names: str) -> FloatArray:
         for n in names:
-            node = fs.getNode(n)
-            if not node.empty():
-                m = node.mat()
-                if m is not None:
-                    return np.asarray(m, dtype=float)
+            if n in doc:
+                return _opencv_matrix(path, n, doc[n])
         raise ConfigError(f"{path}: missing matrix {' / '.join(names)}")
 
     def number(name: str) -> float | None:
-        node = fs.getNode(name)
-        return None if node.empty() else float(node.real())
+        value = doc.get(name)
+        if value is None:
+            return None
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{path}: {name}: expected a number; found {quote(value)}")
+        return float(value)
 
     w, h = number("image_width"), number("image_height")
     if w is None or h is None:
-        size = fs.getNode("imageSize")
-        if size.empty():
+        if "imageSize" not in doc:
             raise ConfigError(f"{path}: missing image_width/image_height or imageSize")
-        w, h = float(size.at(0).real()), float(size.at(1).real())
-    left = CameraModel(int(w), int(h), mat("K1", "M1", "cameraMatrix1"), mat("D1", "distCoeffs1").ravel())
-    right = CameraModel(int(w), int(h), mat("K2", "M2", "cameraMatrix2"), mat("D2", "distCoeffs2").ravel())
+        size = doc["imageSize"]
+        if isinstance(size, dict):
+            size = _opencv_matrix(path, "imageSize", size).ravel().tolist()
+        if not (isinstance(size, list) and len(size) == 2):
+            raise ConfigError(f"{path}: imageSize: expected [width, height]; found {quote(size)}")
+        w, h = (
+            float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else math.nan for v in size
+        )
+    if not (math.isfinite(w) and math.isfinite(h) and w == int(w) and h == int(h)):
+        raise ConfigError(f"{path}: image size {w} x {h} is not a whole number of pixels")
+    try:
+        left = CameraModel(int(w), int(h), mat("K1", "M1", "cameraMatrix1"), mat("D1", "distCoeffs1").ravel())
+        right = CameraModel(
+            int(w), int(h), mat("K2", "M2", "cameraMatrix2"), mat("D2", "distCoeffs2").ravel()
+        )
+    except ValueError as err:
+        raise ConfigError(f"{path}: {err}") from err
     R, T = mat("R"), mat("T").ravel()
-    fs.release()
+    if R.shape != (3, 3) or T.shape != (3,):
+        raise ConfigError(f"{path}: R must be 3x3 and T 3x1; found {R.shape} and {T.shape}")
     return left, right, R, T
+
+
+#: Element types of an OpenCV matrix (``dt``) read: one channel of a number type.
+_OPENCV_TYPES = ("u", "c", "w", "s", "i", "f", "d")
+
+
+def _opencv_document(path: Path) -> dict[str, Any]:
+    """The top-level mapping of an OpenCV FileStorage file; matrices as mappings with ``rows``,
+    ``cols``, ``dt`` and ``data``."""
+    text, problems = read_text(path, str(path))
+    if text is None:
+        raise ConfigError(str(problems[0]))
+    body = text.removeprefix("\ufeff").lstrip()
+    if body.startswith("<"):
+        return _opencv_xml(path, body)
+    lines = body.splitlines()
+    if lines and re.match(r"%YAML[: ]", lines[0]):
+        lines = lines[1:]
+    doc, problems = parse_yaml(
+        "\n".join(lines), str(path), mapping_tags=("opencv-matrix", "opencv-nd-matrix")
+    )
+    if problems:
+        raise ConfigError(str(problems[0]))
+    if not isinstance(doc, dict):
+        raise ConfigError(f"{path}: not an OpenCV FileStorage file (expected a mapping of names)")
+    return doc
+
+
+def _opencv_xml(path: Path, text: str) -> dict[str, Any]:
+    """An OpenCV FileStorage XML file as the mapping :func:`_opencv_document` gives."""
+    import xml.etree.ElementTree as ET
+
+    if "<!DOCTYPE" in text or "<!ENTITY" in text:
+        raise ConfigError(f"{path}: XML with a document type or entities is not read")
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as err:
+        raise ConfigError(f"{path}: not valid XML ({quote(str(err))})") from None
+    if root.tag != "opencv_storage":
+        raise ConfigError(f"{path}: not an OpenCV FileStorage file (root element {quote(root.tag)})")
+
+    def value(text: str | None) -> Any:
+        words = (text or "").split()
+        numbers: list[int | float] = []
+        for w in words:
+            try:
+                numbers.append(int(w) if re.fullmatch(r"[-+]?[0-9]{1,18}", w) else float(w))
+            except ValueError:
+                return " ".join(words)
+        return numbers[0] if len(numbers) == 1 else numbers
+
+    doc: dict[str, Any] = {}
+    for node in root:
+        if node.get("type_id") in ("opencv-matrix", "opencv-nd-matrix"):
+            matrix = {child.tag: value(child.text) for child in node}
+            for key in ("data", "sizes"):
+                if key in matrix and not isinstance(matrix[key], list):
+                    matrix[key] = [matrix[key]]
+            doc[node.tag] = matrix
+        else:
+            doc[node.tag] = value(node.text)
+    return doc
+
+
+def _opencv_matrix(path: Path, name: str, node: Any) -> FloatArray:
+    """An OpenCV matrix node as a float array: ``rows``, ``cols``, ``dt``, ``data``
+    (``opencv-matrix``), or ``sizes``, ``dt``, ``data`` (``opencv-nd-matrix``, one or two sizes)."""
+    if (
+        not isinstance(node, dict)
+        or "data" not in node
+        or not ({"rows", "cols"} <= set(node) or "sizes" in node)
+    ):
+        raise ConfigError(
+            f"{path}: {name}: expected an opencv-matrix (rows, cols, dt, data); found {quote(node)}"
+        )
+    shape = node["sizes"] if "sizes" in node else [node["rows"], node["cols"]]
+    data, dt = node["data"], node.get("dt", "d")
+    if not (
+        isinstance(shape, list)
+        and 1 <= len(shape) <= 2
+        and all(isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 16 for v in shape)
+    ):
+        raise ConfigError(
+            f"{path}: {name}: its size must be one or two integers in [1, 16]; found {quote(shape)}"
+        )
+    if dt not in _OPENCV_TYPES:
+        raise ConfigError(
+            f"{path}: {name}: element type dt must be one of {', '.join(_OPENCV_TYPES)}; found {quote(dt)}"
+        )
+    count = int(np.prod(shape))
+    if not isinstance(data, list) or len(data) != count:
+        raise ConfigError(f"{path}: {name}: data must hold {count} numbers; found {quote(data)}")
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in data):
+        raise ConfigError(f"{path}: {name}: data must be finite numbers; found {quote(data)}")
+    return np.asarray(data, dtype=float).reshape(shape)
 
 
 def read_ros_stereo(
@@ -334,23 +492,61 @@ def read_ros_stereo(
             D = np.asarray(d["distortion_coefficients"]["data"], dtype=float)
             R = np.asarray(d["rectification_matrix"]["data"], dtype=float).reshape(3, 3)
             P = np.asarray(d["projection_matrix"]["data"], dtype=float).reshape(3, 4)
-            cam = CameraModel(int(d["image_width"]), int(d["image_height"]), K, D)
-        except (KeyError, TypeError, ValueError) as err:
-            raise ConfigError(f"{p}: not a ROS camera_info YAML ({type(err).__name__}: {err})") from err
+            if not all(np.all(np.isfinite(m)) for m in (K, D, R, P)):
+                raise ValueError("a matrix holds a value that is not a finite number")
+            width, height = d["image_width"], d["image_height"]
+            if not all(isinstance(v, int) and not isinstance(v, bool) for v in (width, height)):
+                raise ValueError(
+                    f"image_width and image_height must be integers; found {quote(width)}, {quote(height)}"
+                )
+            cam = CameraModel(width, height, K, D)
+        except (KeyError, TypeError, ValueError, OverflowError) as err:
+            raise ConfigError(
+                f"{p}: not a ROS camera_info YAML ({type(err).__name__}: {quote(str(err))})"
+            ) from err
         if d.get("distortion_model", "plumb_bob") not in ("plumb_bob", "rational_polynomial"):
-            raise ConfigError(f"{p}: unsupported distortion_model {d.get('distortion_model')!r}")
+            raise ConfigError(f"{p}: unsupported distortion_model {quote(d.get('distortion_model'))}")
+        if not is_rotation(R):
+            raise ConfigError(f"{p}: rectification_matrix is not a rotation")
         infos.append((cam, R, P))
     (left, R1, _), (right, R2, P2) = infos
-    baseline = -P2[0, 3] / P2[0, 0]
-    if baseline == 0:
+    baseline = -P2[0, 3] / P2[0, 0] if P2[0, 0] != 0 else 0.0
+    if baseline == 0 or not math.isfinite(baseline):
         raise ConfigError(
             f"{right_path}: projection_matrix has no baseline (P[0,3] = 0); is it the right camera?"
         )
     return left, right, R2.T @ R1, -R2.T @ np.array([baseline, 0.0, 0.0])
 
 
+def calibration_files(data: Any) -> list[str]:
+    """The stereo calibration files a parsed vehicle.yaml names (relative to its folder), if any."""
+    stereo = data.get("stereo") if isinstance(data, dict) else None
+    files = stereo.get("calibration_file") if isinstance(stereo, dict) else None
+    names = [files] if isinstance(files, str) else files if isinstance(files, list) else []
+    return [n for n in names if isinstance(n, str) and n]
+
+
+def image_size_problem(path: Path, display: str, cam: CameraModel, vehicle_display: str) -> Problem | None:
+    """The problem when an image's size (read from its header) is not the calibrated one, else None
+    (also when the header cannot be read: the stage that reads the image says so)."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as image:
+            w, h = image.size
+    except (OSError, UnidentifiedImageError, ValueError, Image.DecompressionBombError):
+        return None
+    if (w, h) == (cam.width, cam.height):
+        return None
+    return Problem(
+        display,
+        f"image is {w}x{h} but the stereo calibration in {vehicle_display} is for {cam.width}x{cam.height}; "
+        "images and calibration must match (scale the calibration with the images)",
+    )
+
+
 def _stereo(s: _StereoFile, base: Path) -> StereoRig:
-    if s.left and s.right and s.R_right_left and s.t_right_left_m:
+    if s.calibration_file is None and s.left is not None and s.right is not None:
         left, right = _camera(s.left), _camera(s.right)
         R, t = np.asarray(s.R_right_left, dtype=float), np.asarray(s.t_right_left_m, dtype=float)
     elif s.calibration_format == "opencv":

@@ -350,3 +350,14 @@ def test_too_few_directions(scott_reef_field, method: str) -> None:
     m = distort_field(_body_field(f, heading, pitch, 0.0), H_SOFT_SYMMETRIC, HARD_IRON_FRACTION * f.total_T)
     with pytest.raises(InsufficientDataError, match="too few distinct directions; turn the vehicle"):
         calibrate_magnetometer(m, pitch, 0.0, method=method)
+
+
+@pytest.mark.parametrize("method", ["levelled", "ellipsoid"])
+def test_noise_is_no_magnetometer_and_is_refused(method: str) -> None:
+    """Samples that are noise about zero (no field at all) fit some ellipse; the field they leave still
+    varies by tens of percent, and no calibration is made of them."""
+    rng = np.random.default_rng(3)
+    m = rng.normal(0.0, 1e-5, (600, 3))
+    tilt = rng.normal(0.0, 0.3, 600) if method == "ellipsoid" else np.zeros(600)
+    with pytest.raises(InsufficientDataError, match="do not (lie on an ellipsoid|determine)"):
+        calibrate_magnetometer(m, tilt, tilt[::-1].copy(), method=method)

@@ -34,6 +34,13 @@ VerboseOpt = Annotated[int, typer.Option("-v", "--verbose", count=True, help="Mo
 QuietOpt = Annotated[bool, typer.Option("-q", "--quiet", help="Only warnings and errors.")]
 OverwriteOpt = Annotated[bool, typer.Option("--overwrite", help="Replace existing outputs.")]
 DiveArg = Annotated[Path, typer.Argument(metavar="DIVE", help="A dive folder (format auvnav-dive/1).")]
+AllowOutsideOpt = Annotated[
+    bool,
+    typer.Option(
+        "--allow-outside",
+        help="Read files the dive names outside its folder (vehicle, calibration, links); each one is said.",
+    ),
+]
 WorkersOpt = Annotated[
     int | None, typer.Option("--workers", min=1, help="Local processes for per-image work [every core].")
 ]
@@ -202,10 +209,13 @@ def stage_command(parent: typer.Typer, stage: Stage, name: str, doc: str) -> Non
         setup_logging(values.pop("verbose"), values.pop("quiet"))
         as_json = values.pop("as_json")
         dive = values.pop("dive")
+        allow_outside = values.pop("allow_outside")
         executor = {k: values.pop(k) for k in ("workers", "scheduler") if k in values}
         settings = settings_from_options(stage.settings, {k: values[k] for k in fields})
         with progress_bars(as_json or logging.getLogger().level > logging.INFO) as progress:
-            summary = run_stage(dive, stage.name, settings, progress=progress, **executor)
+            summary = run_stage(
+                dive, stage.name, settings, progress=progress, allow_outside=allow_outside, **executor
+            )
         if stage.name != "report":
             run_stage(dive, "report")
         emit(summary, stage.describe(summary), as_json=as_json)
@@ -213,6 +223,9 @@ def stage_command(parent: typer.Typer, stage: Stage, name: str, doc: str) -> Non
     params = [
         dive_parameter(),
         *setting_parameters(stage.settings),
+        inspect.Parameter(
+            "allow_outside", inspect.Parameter.KEYWORD_ONLY, default=False, annotation=AllowOutsideOpt
+        ),
         *common_parameters(executor=stage.uses_executor),
     ]
     command_with(parent, name, doc, params, body)

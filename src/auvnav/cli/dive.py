@@ -7,22 +7,37 @@ from typing import Annotated
 
 import typer
 
-from auvnav.cli.common import DiveArg, JsonOpt, QuietOpt, VerboseOpt, app, emit, log, setup_logging
+from auvnav.cli.common import (
+    AllowOutsideOpt,
+    DiveArg,
+    JsonOpt,
+    QuietOpt,
+    VerboseOpt,
+    app,
+    emit,
+    log,
+    setup_logging,
+)
 from auvnav.errors import DiveFormatError
 
 
 @app.command()
 def validate(
     dive: DiveArg,
+    allow_outside: AllowOutsideOpt = False,
     as_json: JsonOpt = False,
     verbose: VerboseOpt = 0,
     quiet: QuietOpt = False,
 ) -> None:
-    """Check a dive folder: every problem with its file, row and column; a summary when it is valid."""
+    """Check a dive folder: every problem with its file, row and column; a summary when it is valid.
+
+    Every check the stages make of the dive's files is made here, so a dive that validates is one
+    they read. Files the dive names outside its folder are errors unless --allow-outside.
+    """
     from auvnav.dive import validate_dive
 
     setup_logging(verbose, quiet)
-    report = validate_dive(dive)
+    report = validate_dive(dive, allow_outside=allow_outside)
     for w in report.warnings:
         log.warning(w)
     if not report.ok:

@@ -24,17 +24,19 @@ references the vertical. Degenerate samples are an error that says what is missi
 
 from __future__ import annotations
 
+import contextlib
 import math
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-import yaml
 
 from auvnav.compass.field import ModelChoice, earth_field
 from auvnav.compass.magnetometer import CalibrationMethod, calibrate_magnetometer, heading_from_magnetometer
-from auvnav.dive import read_dive
-from auvnav.errors import ConfigError, DiveFormatError, Problem
+from auvnav.config import load_yaml
+from auvnav.dive import MagnetometerStream, find_stream_file, read_dive
+from auvnav.errors import ConfigError, DiveFormatError, InsufficientDataError, Problem
 from auvnav.frames import FloatArray, angle_diff, wrap_angle
 from auvnav.nav.inputs import declination
 from auvnav.streams import Field, read_table
@@ -63,13 +65,24 @@ def _true_hard_iron_nT(dive_path: Path) -> tuple[FloatArray, float] | None:
     path = dive_path / TRUTH_DIR / "truth.yaml"
     if not path.is_file():
         return None
-    doc = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    doc, problems = load_yaml(path, str(path))
+    if problems:
+        raise DiveFormatError(problems)
     try:
         h = np.asarray(doc["compass"]["h_hard_body_nT"], dtype=float)
         field = float(np.linalg.norm(np.asarray(doc["earth_field"]["b_ned_nT"], dtype=float)))
     except (KeyError, TypeError, ValueError) as err:
         raise DiveFormatError([Problem(str(path), f"no usable hard iron or earth field ({err})")]) from err
     return h, field
+
+
+@contextlib.contextmanager
+def _naming(path: Path) -> Iterator[None]:
+    """Degenerate samples are a one-line error that names their file."""
+    try:
+        yield
+    except InsufficientDataError as err:
+        raise InsufficientDataError(f"{path}: {err}") from None
 
 
 def calibrate_dive(
@@ -137,13 +150,16 @@ def calibrate_dive(
         model = earth_field(
             origin.latitude_rad, origin.longitude_rad, dive.info.start_time_s, model=model_choice
         )
-    cal = calibrate_magnetometer(
-        mag.m_body,
-        pitch,
-        roll,
-        method=method,
-        inclination_rad=None if model is None else model.inclination_rad,
-    )
+    with _naming(
+        find_stream_file(dive_path, MagnetometerStream.FILE) or dive_path / "nav" / "magnetometer.csv"
+    ):
+        cal = calibrate_magnetometer(
+            mag.m_body,
+            pitch,
+            roll,
+            method=method,
+            inclination_rad=None if model is None else model.inclination_rad,
+        )
     calibrated = cal.apply(mag.m_body)
     heading = heading_from_magnetometer(calibrated, pitch, roll)
     compass = _interp_angle(mag.t_s, att.t_s, att.heading_rad)
@@ -311,13 +327,14 @@ def calibrate_samples(
                 "the field model's inclination needs pitch and roll to reference the vertical: not used"
             )
             field = None
-    cal = calibrate_magnetometer(
-        m,
-        0.0 if pitch is None else pitch,
-        0.0 if roll is None else roll,
-        method=method,  # type: ignore[arg-type]
-        inclination_rad=None if field is None else field.inclination_rad,
-    )
+    with _naming(Path(path)):
+        cal = calibrate_magnetometer(
+            m,
+            0.0 if pitch is None else pitch,
+            0.0 if roll is None else roll,
+            method=method,  # type: ignore[arg-type]
+            inclination_rad=None if field is None else field.inclination_rad,
+        )
     unit = float(np.mean(np.linalg.norm(cal.apply(m), axis=1)))
     return {
         "samples": str(path),

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from auvnav.compass.deviation import CONSTANT_SOURCES, DeviationFit, DeviationModel
-from auvnav.config import dump_yaml, load_yaml, quote
+from auvnav.config import cut, dump_yaml, load_yaml, quote
 from auvnav.errors import ConfigError, OutputExistsError
 from auvnav.streams import atomic_write
 
@@ -185,7 +185,7 @@ def _keys(path: Path, where: str, doc: Any, required: tuple[str, ...], optional:
     prefix = f"{where}." if where else ""
     for key in doc:
         if key not in required + optional:
-            raise ConfigError(f"{path}: {prefix}{key}: unknown key")
+            raise ConfigError(f"{path}: {cut(prefix + str(key))}: unknown key")
     for key in required:
         if key not in doc:
             raise ConfigError(f"{path}: {prefix}{key}: missing")
@@ -264,16 +264,21 @@ def read_correction(path: str | Path) -> DeviationModel:
             raise ConfigError(f"{path}: gaps_deg: expected a list of [start, end] pairs")
         for i, gap in enumerate(gaps):
             _numbers(path, f"gaps_deg[{i}]", gap, 2)
-    model = DeviationModel(math.radians(a0), np.radians(a), np.radians(b), cov, constant_source=source)
+    try:
+        model = DeviationModel(math.radians(a0), np.radians(a), np.radians(b), cov, constant_source=source)
+    except ValueError as err:
+        raise ConfigError(f"{path}: {err}") from None
     table = doc["table"]
     if not isinstance(table, list) or len(table) != TABLE_ROWS:
         raise ConfigError(f"{path}: table: expected {TABLE_ROWS} rows [heading_deg, correction_deg]")
     rows = np.array([_numbers(path, f"table[{i}]", r, 2) for i, r in enumerate(table)])
     if not np.array_equal(rows[:, 0], np.arange(TABLE_ROWS)):
         raise ConfigError(f"{path}: table: headings must be 0, 1, ..., {TABLE_ROWS - 1} degrees")
-    expected = np.degrees(model(np.radians(rows[:, 0])))
-    worst = int(np.argmax(np.abs(rows[:, 1] - expected)))
-    if abs(rows[worst, 1] - expected[worst]) > _TABLE_TOLERANCE_DEG:
+    with np.errstate(over="ignore", invalid="ignore"):
+        expected = np.degrees(model(np.radians(rows[:, 0])))
+        error = np.abs(rows[:, 1] - expected)
+    worst = int(np.argmax(np.where(np.isfinite(error), error, np.inf)))
+    if not error[worst] <= _TABLE_TOLERANCE_DEG:
         raise ConfigError(
             f"{path}: table[{worst}]: correction {rows[worst, 1]:.4f} deg disagrees with the "
             f"coefficients ({expected[worst]:.4f} deg)"

@@ -532,6 +532,7 @@ def fit_compass(
     max_turn_rate_rad_s: float = math.radians(MAX_TURN_RATE_DEG_S),
     dvl_yaw_sigma_rad: float = math.radians(DVL_YAW_SIGMA_DEG),
     transits_optional: bool = False,
+    allow_outside: bool = False,
 ) -> CompassFit:
     """Fit the compass correction from dives against a reference; fix its constant from transits.
 
@@ -555,6 +556,8 @@ def fit_compass(
     transits_optional : bool
         With fewer than two usable legs, leave the constant arbitrary (the legs are still reported)
         instead of raising.
+    allow_outside : bool
+        Read files the dives name outside their folders (each is said; :func:`auvnav.dive.read_dive`).
 
     Returns
     -------
@@ -575,7 +578,7 @@ def fit_compass(
     def load(path: Path) -> Dive:
         key = Path(path).resolve()
         if key not in loaded:
-            loaded[key] = read_dive(Path(path))
+            loaded[key] = read_dive(Path(path), allow_outside=allow_outside)
         return loaded[key]
 
     parts = []

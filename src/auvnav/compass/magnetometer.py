@@ -104,6 +104,11 @@ MAX_HEADING_GAP_DEG = 90.0
 # simulated partial-coverage sets, tests/compass/test_magnetometer.py), so it must be a tenth of
 # the 1% target for the realised error to stay under 1%.
 MAX_SIGMA_GENERAL = 0.001
+# After a calibration the field's magnitude is constant up to the sensor's noise and what tilt errors
+# leave (0.1 to 0.4% on the simulated spins, benchmarks/bench_compass.py); samples that still spread
+# more than this fraction of the field did not lie on an ellipsoid at all (noise, mixed units, a sensor
+# that moved during the dive), and no calibration is made of them.
+MAX_SPREAD_AFTER = 0.05
 
 
 def _vectors(name: str, v: ArrayLike) -> FloatArray:
@@ -670,6 +675,14 @@ def calibrate_magnetometer(
                 "model's inclination",
             )
     calibrated = (m - h_hard) @ A.T
+    level = method == "levelled"
+    spread = _relative_spread(_level(R_level_body, calibrated)[:, :2] if level else calibrated)
+    if not spread <= MAX_SPREAD_AFTER:
+        raise InsufficientDataError(
+            f"the magnetometer samples do not lie on an ellipsoid: after calibration the "
+            f"{'horizontal ' if level else ''}field still varies by {100.0 * spread:.1f}% (RMS) of its "
+            f"size, at most {100.0 * MAX_SPREAD_AFTER:g}% (noise, mixed units, or a sensor that moved?)"
+        )
     cal = MagnetometerCalibration(
         h_hard_body=h_hard,
         A_soft=A,

@@ -61,7 +61,9 @@ class CompassSettings:
     )
 
 
-def fit(dives: Sequence[Path], settings: CompassSettings, *, own_legs: bool = False) -> CompassFit:
+def fit(
+    dives: Sequence[Path], settings: CompassSettings, *, own_legs: bool = False, allow_outside: bool = False
+) -> CompassFit:
     """The correction of ``dives`` with ``settings`` (:func:`auvnav.compass.fit.fit_compass`); with
     ``own_legs`` and no transits given, the first dive's own legs fix the constant when they can."""
     from auvnav.compass.fit import fit_compass
@@ -74,6 +76,7 @@ def fit(dives: Sequence[Path], settings: CompassSettings, *, own_legs: bool = Fa
         transits=transits,
         harmonics=settings.harmonics,
         transits_optional=own_legs and not settings.transits,
+        allow_outside=allow_outside,
         **({} if turn is None else {"max_turn_rate_rad_s": math.radians(turn)}),
     )
 
@@ -139,7 +142,7 @@ def _inputs(dive: Path, settings: CompassSettings) -> dict[str, Path]:
 
 def _run(ctx: StageContext, settings: CompassSettings, out: Path) -> dict[str, Any]:
     try:
-        result = fit([ctx.dive], settings, own_legs=True)
+        result = fit([ctx.dive], settings, own_legs=True, allow_outside=ctx.allow_outside)
     except InsufficientDataError as err:
         raise StageSkipped(f"the dive's headings cannot give a correction: {err}") from err
     band_deg = np.degrees(result.fit.model.sigma(np.radians(np.arange(360.0))))

@@ -31,6 +31,7 @@ import gsw
 import numpy as np
 from numpy.typing import ArrayLike
 
+from auvnav.config import quote, read_text
 from auvnav.errors import DiveFormatError, Problem
 from auvnav.frames import FloatArray
 
@@ -46,6 +47,7 @@ A value outside it is a unit error (hPa, kPa, bar, psi), not weather."""
 
 _ATMOSPHERIC_COLUMNS = ("t", "pressure_dbar")
 _MAX_PROBLEMS = 10
+_MAX_ATMOSPHERIC_BYTES = 64 * 2**20  # a year of one-minute readings is about 15 MB
 
 # UNESCO 1983 depth (Fofonoff & Millard 1983, pp. 25-28): the integrated specific volume of the
 # standard ocean (S = 35, T = 0 degC) as a polynomial in p [dbar], coefficients c1..c4 ...
@@ -203,15 +205,22 @@ def read_atmospheric(path: Path) -> AtmosphericSeries:
     """
     path = Path(path)
     name = str(path)
+    text, problems = read_text(path, name, max_bytes=_MAX_ATMOSPHERIC_BYTES)
+    if text is None:
+        raise DiveFormatError(problems)
+    lines = text.removeprefix("\ufeff").splitlines()
     try:
-        lines = path.read_text(encoding="utf-8-sig").splitlines()
-    except UnicodeDecodeError as err:
-        raise DiveFormatError([Problem(name, f"not a UTF-8 text file ({err.reason})")]) from err
+        return _atmospheric_rows(name, lines)
+    except csv.Error as err:
+        raise DiveFormatError([Problem(name, f"not a CSV file ({quote(str(err))})")]) from None
+
+
+def _atmospheric_rows(name: str, lines: list[str]) -> AtmosphericSeries:
     rows = csv.reader(line for line in lines if line.strip() and not line.lstrip().startswith("#"))
     header = [field.strip() for field in next(rows, [])]
     missing = [c for c in _ATMOSPHERIC_COLUMNS if c not in header]
     if missing:
-        found = ",".join(header) or "nothing"
+        found = quote(",".join(header)) if header else "nothing"
         message = f"missing column(s) {', '.join(missing)} in the header; found {found}"
         raise DiveFormatError([Problem(name, message, row=0)])
     columns = [header.index(c) for c in _ATMOSPHERIC_COLUMNS]
@@ -229,7 +238,7 @@ def read_atmospheric(path: Path) -> AtmosphericSeries:
             except ValueError:
                 parsed.append(math.nan)
             if not math.isfinite(parsed[-1]):
-                message = f"{fields[index].strip()!r} is not a finite number"
+                message = f"{quote(fields[index].strip())} is not a finite number"
                 problems.append(Problem(name, message, row, column))
         if all(math.isfinite(v) for v in parsed):
             data.append((row, parsed[0], parsed[1]))
@@ -241,7 +250,8 @@ def read_atmospheric(path: Path) -> AtmosphericSeries:
     if row_of != sorted(row_of):
         log.info("%s: rows are not in time order; sorted", name)
     t_s = np.array([item[1] for item in data])
-    p_pa = np.array([item[2] for item in data]) * DBAR_TO_PA
+    with np.errstate(over="ignore"):  # 1e308 dbar is inf Pa: implausible below
+        p_pa = np.array([item[2] for item in data]) * DBAR_TO_PA
     for i in np.flatnonzero(np.diff(t_s) == 0) + 1:
         problems.append(Problem(name, f"duplicate time {float(t_s[i])!r}", row_of[i], "t"))
     implausible = np.flatnonzero(_implausible_atmospheric(p_pa))

@@ -78,7 +78,7 @@ def _run(ctx: StageContext, settings: DepthSettings, out: Path) -> dict[str, Any
     from auvnav.depth.tide import read_constituents
     from auvnav.depth.validation import check_depth
 
-    dive = read_dive(ctx.dive)
+    dive = read_dive(ctx.dive, allow_outside=ctx.allow_outside)
     loops_path = loops_file(ctx.dive, settings.loops)
     if dive.images is None or loops_path is None or not loops_path.is_file():
         shown = loops_path or P.LOOPS.path(ctx.dive)

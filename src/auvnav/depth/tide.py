@@ -53,6 +53,7 @@ from utide._ut_constants import constit_index_dict as _UTIDE_INDEX
 from utide._ut_constants import ut_constants as _UTIDE_CONSTANTS
 from utide.utilities import Bunch
 
+from auvnav.config import quote, read_text
 from auvnav.errors import ConfigError, InsufficientDataError
 from auvnav.frames import FloatArray
 
@@ -63,6 +64,7 @@ _UTIDE_EPOCH = "1970-01-01"  # utide takes days since this epoch: t_s / SECONDS_
 _POSIX_EPOCH_DATENUM = float(date(1970, 1, 1).toordinal())  # utide's datenum (days since 0000-12-31)
 _PREDICT_BLOCK = 20_000  # samples per call to utide.reconstruct: bounds its (samples x 162) arrays
 _COLUMNS = ("name", "amplitude_m", "phase_deg")
+_MAX_FILE_BYTES = 2**20  # a constituent file is a few hundred bytes: utide's table has 146 names
 _COMMENT = re.compile(r"#\s*(\w+)\s*:\s*(.*)$")
 _MEAN_NAME = "Z0"
 # Options analyse_gauge sets itself, and options whose other values would break the model's meaning.
@@ -204,7 +206,7 @@ def _parse_number(path: Path, line: int, column: str, text: str) -> float:
     except ValueError:
         value = math.nan
     if not math.isfinite(value):
-        raise _fail(path, line, f"{column} {text.strip()!r} is not a finite number")
+        raise _fail(path, line, f"{column} {quote(text.strip())} is not a finite number")
     return value
 
 
@@ -214,7 +216,7 @@ def _check_name(path: Path, line: int, name: str, seen: set[str]) -> None:
     if name not in _UTIDE_INDEX:
         close = [n for n in _UTIDE_INDEX if n.upper() == name.upper()]
         hint = f" (did you mean {close[0]!r}?)" if close else ""
-        raise _fail(path, line, f"unknown constituent {name!r}{hint}; not in utide's table")
+        raise _fail(path, line, f"unknown constituent {quote(name)}{hint}; not in utide's table")
     if name in seen:
         raise _fail(path, line, f"constituent {name} appears twice")
     seen.add(name)
@@ -236,10 +238,10 @@ def read_constituents(path: Path, *, latitude_rad: float) -> TideModel:
         One line naming the file, the line and the problem.
     """
     path = Path(path)
-    try:
-        lines = path.read_text(encoding="utf-8-sig").splitlines()
-    except UnicodeDecodeError as err:
-        raise ConfigError(f"{path}: not a UTF-8 text file ({err.reason})") from err
+    text, problems = read_text(path, str(path), max_bytes=_MAX_FILE_BYTES)
+    if text is None:
+        raise ConfigError(str(problems[0]))
+    lines = text.removeprefix("\ufeff").splitlines()
     meta: dict[str, str] = {}
     header: list[str] | None = None
     constituents: list[Constituent] = []
@@ -260,7 +262,10 @@ def read_constituents(path: Path, *, latitude_rad: float) -> TideModel:
             if key == "mean_m":
                 _parse_number(path, number, "mean_m", meta[key])
             continue
-        fields = [field.strip() for field in next(csv.reader([line]))]
+        try:
+            fields = [field.strip() for field in next(csv.reader([line]))]
+        except csv.Error as err:
+            raise _fail(path, number, f"not a CSV line ({err})") from None
         if header is None:
             missing = [c for c in _COLUMNS if c not in fields]
             unknown = [f for f in fields if f not in _COLUMNS]
@@ -268,7 +273,7 @@ def read_constituents(path: Path, *, latitude_rad: float) -> TideModel:
                 raise _fail(
                     path,
                     number,
-                    f"the header must name the columns {','.join(_COLUMNS)}; found {line.strip()!r}"
+                    f"the header must name the columns {','.join(_COLUMNS)}; found {quote(line.strip())}"
                     + (f" (missing {', '.join(missing)})" if missing else ""),
                 )
             header = fields

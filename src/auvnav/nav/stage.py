@@ -98,7 +98,7 @@ def _run(ctx: StageContext, settings: NavSettings, out: Path) -> dict[str, Any]:
     from auvnav.compass.correction import read_correction
     from auvnav.nav.navigate import navigate
 
-    dive = read_dive(ctx.dive)
+    dive = read_dive(ctx.dive, allow_outside=ctx.allow_outside)
     name = settings.compass_correction
     result = navigate(
         dive,

@@ -49,10 +49,10 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-import yaml
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from auvnav.config import dump_yaml, load_yaml, pydantic_problems, quote
 from auvnav.errors import ConfigError
 from auvnav.streams import atomic_write
 
@@ -66,6 +66,22 @@ DEFAULT_SPEED_MPS = 0.5
 DEFAULT_ALTITUDE_M = 2.0
 DEFAULT_SURFACE_S = 120.0  # time at the surface for GPS fixes before and after each dive
 DEFAULT_SPIN_RATE_DEG_S = 5.0
+
+# Bounds of a mission a vehicle could fly (the simulator allocates by duration and extent).
+#: Farthest waypoint from the origin, metres (the longest AUV transits are tens of kilometres).
+MAX_EXTENT_M = 100e3
+#: Longest planned mission, seconds (the longest AUV dives last about a day).
+MAX_DURATION_S = 48 * 3600.0
+#: Most waypoints in a mission (a 75 m x 50 m survey at 1 m spacing has about 100).
+MAX_WAYPOINTS = 100_000
+#: Fastest and slowest speed, m/s; highest altitude, metres; fastest spin, deg/s.
+SPEED_RANGE_MPS = (0.01, 10.0)
+MAX_ALTITUDE_M = 1000.0
+MAX_SPIN_RATE_DEG_S = 90.0
+#: Vertical rate and water depth assumed when the duration of a mission is bounded (the simulator's
+#: defaults are of this order).
+_BOUND_VERTICAL_RATE_MPS = 0.5
+_BOUND_WATER_DEPTH_M = 0.0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -203,7 +219,15 @@ class Mission:
 def _positive(**values: float) -> None:
     for name, v in values.items():
         if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
-            raise ConfigError(f"mission option {name} must be a positive number; found {v!r}")
+            raise ConfigError(f"mission option {name} must be a positive number; found {quote(v)}")
+        if v > MAX_EXTENT_M:
+            raise ConfigError(f"mission option {name} must be at most {MAX_EXTENT_M:g} m; found {v:g}")
+
+
+def _count(name: str, n: int) -> None:
+    """Refuse options that would make more than :data:`MAX_WAYPOINTS` waypoints (before making them)."""
+    if n > MAX_WAYPOINTS // 2:
+        raise ConfigError(f"mission options give {n:.3g} {name}; at most {MAX_WAYPOINTS // 2}")
 
 
 def _unit(heading_rad: float) -> tuple[float, float]:
@@ -238,8 +262,10 @@ def navcheck(
         Centred on the dive's origin, where the vehicle descends.
     """
     if not isinstance(headings, int) or headings < 1:
-        raise ConfigError(f"mission option headings must be a positive integer; found {headings!r}")
+        raise ConfigError(f"mission option headings must be a positive integer; found {quote(headings)}")
     _positive(leg_m=leg_m, grid_m=grid_m, grid_spacing_m=grid_spacing_m)
+    _count("headings", headings)
+    _count("grid lines (grid_m / grid_spacing_m + 1)", math.floor(grid_m / grid_spacing_m + 1e-9) + 1)
     points: list[tuple[float, float]] = [(0.0, 0.0)]
     for k in range(headings):
         un, ue = _unit(2 * math.pi * k / headings)
@@ -289,8 +315,11 @@ def survey(
     Mission
     """
     _positive(width_m=width_m, height_m=height_m, spacing_m=spacing_m)
-    if not (math.isfinite(lead_in_m) and lead_in_m >= 0):
-        raise ConfigError(f"mission option lead_in_m must be >= 0; found {lead_in_m!r}")
+    if not (math.isfinite(lead_in_m) and 0 <= lead_in_m <= MAX_EXTENT_M):
+        raise ConfigError(f"mission option lead_in_m must be in [0, {MAX_EXTENT_M:g}] m; found {lead_in_m!r}")
+    if not math.isfinite(heading_deg):
+        raise ConfigError(f"mission option heading_deg must be finite; found {heading_deg!r}")
+    _count("lines (height_m / spacing_m + 1)", math.floor(height_m / spacing_m + 1e-9) + 1)
     heading = math.radians(heading_deg)
     un, ue = _unit(heading)
     rn, re = _unit(heading + math.pi / 2)
@@ -327,8 +356,11 @@ def transit(*, legs: int = 4, leg_m: float = 2000.0, heading_deg: float = 0.0) -
         Heading of the first leg, degrees clockwise from true north.
     """
     if not isinstance(legs, int) or legs < 1:
-        raise ConfigError(f"mission option legs must be a positive integer; found {legs!r}")
+        raise ConfigError(f"mission option legs must be a positive integer; found {quote(legs)}")
     _positive(leg_m=leg_m)
+    _count("legs", legs)
+    if not math.isfinite(heading_deg):
+        raise ConfigError(f"mission option heading_deg must be finite; found {heading_deg!r}")
     segments: list[Segment] = [Surface()]
     here = (0.0, 0.0)
     for k in range(legs):
@@ -351,6 +383,10 @@ def spin(*, turns: float = 3.0, rate_deg_s: float = DEFAULT_SPIN_RATE_DEG_S) -> 
         Turn rate, degrees per second.
     """
     _positive(turns=turns, rate_deg_s=rate_deg_s)
+    if rate_deg_s > MAX_SPIN_RATE_DEG_S:
+        raise ConfigError(
+            f"mission option rate_deg_s must be at most {MAX_SPIN_RATE_DEG_S:g}; found {rate_deg_s:g}"
+        )
     segments: list[Segment] = [
         Surface(),
         Descend(),
@@ -381,7 +417,9 @@ def build_mission(kind: str, options: dict[str, Any]) -> Mission:
     if foreign:
         names = ", ".join("--" + k.replace("_", "-") for k in foreign)
         raise ConfigError(f"{names}: not an option of the {kind} mission")
-    return generator(**given)
+    mission = generator(**given)
+    check_bounds(mission, f"the {kind} mission's options")
+    return mission
 
 
 def survey_line_spacing(
@@ -447,35 +485,42 @@ def survey_line_spacing(
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+_Speed = Annotated[float, Field(ge=SPEED_RANGE_MPS[0], le=SPEED_RANGE_MPS[1])]
+_Altitude = Annotated[float, Field(gt=0, le=MAX_ALTITUDE_M)]
+_Coordinate = Annotated[float, Field(ge=-MAX_EXTENT_M, le=MAX_EXTENT_M)]
 
 
 class _SurfaceFile(_Strict):
     type: Literal["surface"]
-    duration_s: float = Field(default=DEFAULT_SURFACE_S, gt=0)
+    duration_s: float = Field(default=DEFAULT_SURFACE_S, gt=0, le=MAX_DURATION_S)
 
 
 class _DescendFile(_Strict):
     type: Literal["descend"]
-    rate_mps: float | None = Field(default=None, gt=0)
+    rate_mps: _Speed | None = None
 
 
 class _AscendFile(_Strict):
     type: Literal["ascend"]
-    rate_mps: float | None = Field(default=None, gt=0)
+    rate_mps: _Speed | None = None
 
 
 class _LineFile(_Strict):
     type: Literal["line"]
-    waypoints: list[Annotated[list[float], Field(min_length=2, max_length=2)]] = Field(min_length=1)
-    speed_mps: float | None = Field(default=None, gt=0)
-    altitude_m: float | None = Field(default=None, gt=0)
+    waypoints: list[Annotated[list[_Coordinate], Field(min_length=2, max_length=2)]] = Field(
+        min_length=1, max_length=MAX_WAYPOINTS
+    )
+    speed_mps: _Speed | None = None
+    altitude_m: _Altitude | None = None
 
 
 class _SpinFile(_Strict):
     type: Literal["spin"]
-    turns: float = Field(gt=0)
-    rate_deg_s: float = Field(default=DEFAULT_SPIN_RATE_DEG_S, gt=0)
+    turns: float = Field(gt=0, le=1000)
+    rate_deg_s: float = Field(default=DEFAULT_SPIN_RATE_DEG_S, gt=0, le=MAX_SPIN_RATE_DEG_S)
     direction: Literal["cw", "ccw"] = "cw"
 
 
@@ -487,10 +532,10 @@ _SegmentFile = Annotated[
 class _MissionFile(_Strict):
     format: Literal["auvnav-mission/1"]
     name: str = "mission"
-    speed_mps: float = Field(default=DEFAULT_SPEED_MPS, gt=0)
-    altitude_m: float = Field(default=DEFAULT_ALTITUDE_M, gt=0)
+    speed_mps: _Speed = DEFAULT_SPEED_MPS
+    altitude_m: _Altitude = DEFAULT_ALTITUDE_M
     geometry: dict[str, Any] = {}
-    segments: list[_SegmentFile] = Field(min_length=1)
+    segments: list[_SegmentFile] = Field(min_length=1, max_length=MAX_WAYPOINTS)
 
 
 def _segment(f: Any) -> Segment:
@@ -512,18 +557,40 @@ def mission_from_mapping(data: Any, display: str = "mission") -> Mission:
     try:
         f = _MissionFile.model_validate(data)
     except ValidationError as err:
-        e = err.errors()[0]
-        key = ".".join(str(p) for p in e["loc"]) or "(top level)"
-        msg = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
+        first = pydantic_problems(err, display)[0]
         more = f" (and {len(err.errors()) - 1} more problems)" if len(err.errors()) > 1 else ""
-        raise ConfigError(f"{display}: key {key}: {msg}{more}") from None
-    return Mission(
+        raise ConfigError(f"{first}{more}") from None
+    mission = Mission(
         name=f.name,
         segments=tuple(_segment(s) for s in f.segments),
         speed_mps=f.speed_mps,
         altitude_m=f.altitude_m,
         geometry=dict(f.geometry),
     )
+    check_bounds(mission, display)
+    return mission
+
+
+def check_bounds(mission: Mission, display: str = "mission") -> None:
+    """Raise :class:`ConfigError` for a mission no vehicle could fly: a waypoint farther than
+    :data:`MAX_EXTENT_M` from the origin, more than :data:`MAX_WAYPOINTS` waypoints, or longer than
+    :data:`MAX_DURATION_S` (legs at their speed, spins, surface waits; vertical moves not counted)."""
+    n = sum(len(s.waypoints_ne_m) for s in mission.segments if isinstance(s, Line))
+    if n > MAX_WAYPOINTS:
+        raise ConfigError(f"{display}: {n} waypoints; a mission has at most {MAX_WAYPOINTS}")
+    for s in mission.segments:
+        if isinstance(s, Line):
+            far = max(math.hypot(north, east) for north, east in s.waypoints_ne_m)
+            if not far <= MAX_EXTENT_M:
+                raise ConfigError(
+                    f"{display}: a waypoint {far:.3g} m from the origin; a mission stays within "
+                    f"{MAX_EXTENT_M / 1e3:g} km of it"
+                )
+    duration = mission.planned_duration_s(_BOUND_VERTICAL_RATE_MPS, _BOUND_WATER_DEPTH_M)
+    if not duration <= MAX_DURATION_S:
+        raise ConfigError(
+            f"{display}: the mission would last {duration / 3600:.3g} h; at most {MAX_DURATION_S / 3600:g} h"
+        )
 
 
 def _segment_yaml(s: Segment) -> dict[str, Any]:
@@ -562,25 +629,21 @@ def mission_to_mapping(mission: Mission) -> dict[str, Any]:
 
 
 def read_mission(path: Path) -> Mission:
-    """Read a mission file; :class:`ConfigError` with one line naming the file and problem."""
+    """Read a mission file (strict YAML, :func:`auvnav.config.load_yaml`); :class:`ConfigError` with
+    one line naming the file and problem."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except UnicodeDecodeError:
-        raise ConfigError(f"{path}: not a YAML text file (not UTF-8)") from None
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark is not None else ""
-        raise ConfigError(f"{path}: not valid YAML{where}: {getattr(err, 'problem', err)}") from None
+    data, problems = load_yaml(path, str(path))
+    if problems:
+        raise ConfigError(str(problems[0]))
     return mission_from_mapping(data, str(path))
 
 
 def write_mission(mission: Mission, path: Path) -> None:
     """Write a mission file (atomically); one flow-style line per segment."""
     head = {k: v for k, v in mission_to_mapping(mission).items() if k != "segments"}
-    lines = [yaml.safe_dump(head, sort_keys=False, default_flow_style=None, width=100).rstrip(), "segments:"]
+    lines = [dump_yaml(head, default_flow_style=None, width=100).rstrip(), "segments:"]
     for s in mission.segments:
-        text = yaml.safe_dump(_segment_yaml(s), default_flow_style=True, sort_keys=False, width=10**9)
+        text = dump_yaml(_segment_yaml(s), default_flow_style=True, width=10**9)
         lines.append(f"  - {text.strip()}")
     atomic_write(Path(path), lambda p: p.write_text("\n".join(lines) + "\n", encoding="utf-8"))
 

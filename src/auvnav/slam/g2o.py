@@ -46,6 +46,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from auvnav.config import quote
 from auvnav.errors import AuvnavError
 from auvnav.frames import euler2rot, quat_wxyz2rot, rot2quat_wxyz, se3, se3_inverse
 from auvnav.streams import atomic_write, ensure_writable
@@ -58,6 +59,10 @@ IntArray = NDArray[np.int64]
 #: A quaternion whose norm differs from 1 by more than this is an error, not a rounding artefact
 #: (files print 6 to 9 significant digits, so honest norms are within ~1e-6 of 1).
 QUATERNION_NORM_TOLERANCE = 1e-2
+#: Longest line read, characters (an EDGE_SE3:QUAT record with 30 numbers is under 1000).
+MAX_LINE_CHARS = 2**16
+#: Vertex ids must be below this (they are held as int64).
+MAX_VERTEX_ID = 2**63 - 1
 
 
 class PoseGraphFormatError(AuvnavError):
@@ -236,13 +241,28 @@ class PoseGraph:
 def _is_spd(information: FloatArray) -> NDArray[np.bool_]:
     """Which of a stack of (k, k) matrices are symmetric positive definite."""
     info = np.asarray(information, dtype=float)
-    sym = np.all(
-        np.abs(info - np.swapaxes(info, -1, -2)) <= 1e-9 * np.abs(info).max(axis=(-2, -1))[..., None, None],
-        axis=(-2, -1),
-    )
-    eig = np.linalg.eigvalsh(info)
+    with np.errstate(over="ignore", invalid="ignore"):
+        sym = np.all(
+            np.abs(info - np.swapaxes(info, -1, -2))
+            <= 1e-9 * np.abs(info).max(axis=(-2, -1))[..., None, None],
+            axis=(-2, -1),
+        )
+        sym &= np.isfinite(info).all(axis=(-2, -1)) & (np.abs(info).max(axis=(-2, -1)) < 1e150)
+        safe = np.where(sym[..., None, None], info, np.eye(info.shape[-1]))
+        try:
+            eig = np.linalg.eigvalsh(safe)
+        except np.linalg.LinAlgError:  # a matrix LAPACK cannot decompose: judge each on its own
+            eig = np.array([_eigvalsh_or_nan(m) for m in safe.reshape(-1, *info.shape[-2:])])
+            eig = eig.reshape(*info.shape[:-1])
     # Positive beyond rounding: a condition number past 1e12 cannot be factored reliably.
     return sym & np.isfinite(eig).all(axis=-1) & (eig[..., 0] > 1e-12 * np.abs(eig[..., -1]))
+
+
+def _eigvalsh_or_nan(matrix: FloatArray) -> FloatArray:
+    try:
+        return np.linalg.eigvalsh(matrix)
+    except np.linalg.LinAlgError:
+        return np.full(matrix.shape[-1], np.nan)
 
 
 def _fail(path: Path, line_no: int, message: str) -> PoseGraphFormatError:
@@ -259,7 +279,7 @@ def _parse_numbers(path: Path, rows: list[tuple[int, list[str]]]) -> FloatArray:
                 try:
                     float(text)
                 except ValueError:
-                    raise _fail(path, line_no, f"field {col} {text!r} is not a number") from None
+                    raise _fail(path, line_no, f"field {col} {quote(text)} is not a number") from None
         raise
     finite = np.isfinite(values).all(axis=1)
     if not finite.all():
@@ -273,8 +293,10 @@ def _parse_ids(path: Path, rows: list[tuple[int, list[str]]], n_ids: int) -> Int
     for r, (line_no, fields) in enumerate(rows):
         for c in range(n_ids):
             text = fields[c]
-            if not text.isdigit():
-                raise _fail(path, line_no, f"vertex id {text!r} is not a non-negative integer")
+            if not (text.isascii() and text.isdigit()):
+                raise _fail(path, line_no, f"vertex id {quote(text)} is not a non-negative integer")
+            if len(text) > 19 or int(text) > MAX_VERTEX_ID:
+                raise _fail(path, line_no, f"vertex id {quote(text)} is too large (at most 2^63 - 1)")
             out[r, c] = int(text)
     return out
 
@@ -332,17 +354,21 @@ def _compose_from_edges(
         neighbours[rb].append((weight, e, ra, False))
     T = np.full((len(ids), *T_ij.shape[1:]), np.nan)
     T[0] = np.eye(T_ij.shape[-1])
+    reached = np.zeros(len(ids), dtype=bool)
+    reached[0] = True
     frontier = [(w, e, 0, other, fwd) for w, e, other, fwd in neighbours[0]]
     heapq.heapify(frontier)
     while frontier:
         _, e, r, other, forward = heapq.heappop(frontier)
-        if not np.isnan(T[other, 0, 0]):
+        if reached[other]:
             continue
-        T[other] = T[r] @ (T_ij[e] if forward else inverse_rigid(T_ij[e]))
+        with np.errstate(over="ignore", invalid="ignore"):
+            T[other] = T[r] @ (T_ij[e] if forward else inverse_rigid(T_ij[e]))
+        reached[other] = True
         for w, e2, nxt, fwd in neighbours[other]:
-            if np.isnan(T[nxt, 0, 0]):
+            if not reached[nxt]:
                 heapq.heappush(frontier, (w, e2, other, nxt, fwd))
-    unreached = np.isnan(T[:, 0, 0])
+    unreached = ~reached
     if unreached.any():
         raise PoseGraphFormatError(
             f"{path}: the file has no vertices and its edges do not connect vertex "
@@ -372,11 +398,17 @@ def read_g2o(path: str | os.PathLike[str]) -> PoseGraph:
         When the file does not exist.
     """
     path = Path(path)
+    if path.exists() and not path.is_file():  # a named pipe would block for ever
+        raise PoseGraphFormatError(f"{path}: not a regular file")
     by_tag: dict[str, list[tuple[int, list[str]]]] = {}
     dim: int | None = None
     dim_line = 0
     with path.open("r", encoding="utf-8", errors="replace") as handle:
-        for line_no, line in enumerate(handle, start=1):
+        for line_no, line in enumerate(iter(lambda: handle.readline(MAX_LINE_CHARS + 1), ""), start=1):
+            if len(line) > MAX_LINE_CHARS:
+                raise _fail(
+                    path, line_no, f"longer than {MAX_LINE_CHARS} characters: not a pose-graph record"
+                )
             fields = line.split()
             if not fields or fields[0].startswith("#"):
                 continue
@@ -386,7 +418,7 @@ def read_g2o(path: str | os.PathLike[str]) -> PoseGraph:
                 if tag == "EQUIV":
                     raise _fail(path, line_no, "TORO EQUIV (vertex merging) is not supported")
                 known = ", ".join(_RECORDS)
-                raise _fail(path, line_no, f"unknown record {tag!r} (expected one of {known})")
+                raise _fail(path, line_no, f"unknown record {quote(tag)} (expected one of {known})")
             if len(fields) - 1 != record.n_fields:
                 raise _fail(
                     path,

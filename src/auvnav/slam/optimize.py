@@ -298,7 +298,9 @@ def _marginal_covariance(tree: gtsam.GaussianBayesTree, key: int) -> FloatArray:
     try:
         return np.linalg.inv(tree.marginalFactor(key, gtsam.EliminateQR).information())
     except (RuntimeError, np.linalg.LinAlgError) as err:
-        raise PoseGraphSolveError(f"marginals failed at {gtsam.DefaultKeyFormatter(key)}: {_one_line(err)}") from None
+        raise PoseGraphSolveError(
+            f"marginals failed at {gtsam.DefaultKeyFormatter(key)}: {_one_line(err)}"
+        ) from None
 
 
 def solution_trajectory(solution: SlamSolution, sigmas: PoseMarginals | None) -> Trajectory:

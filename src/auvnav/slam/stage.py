@@ -120,7 +120,7 @@ def _run(ctx: StageContext, settings: SlamSettings, out: Path) -> dict[str, Any]
     from auvnav.depth.tide import read_constituents
     from auvnav.slam.result import slam
 
-    dive = read_dive(ctx.dive)
+    dive = read_dive(ctx.dive, allow_outside=ctx.allow_outside)
     if dive.images is None:
         raise InsufficientDataError(f"{ctx.dive}/images/index.csv: not found (a pose per stereo pair)")
     loops_path = loops_file(ctx.dive, settings.loops)

@@ -113,7 +113,7 @@ def check_loops(loops: LoopClosures, n_poses: int, display: str) -> None:
     itself, or whose covariance is not positive definite (1-based data rows; a few of each kind, then
     a count)."""
     outside = (loops.i < 0) | (loops.i >= n_poses) | (loops.j < 0) | (loops.j >= n_poses)
-    eig_min = np.linalg.eigvalsh(loops.covariance)[:, 0] if len(loops) else np.zeros(0)
+    eig_min = _smallest_eigenvalues(loops.covariance)
     problems = flag_rows(
         outside,
         display,
@@ -133,6 +133,23 @@ def check_loops(loops: LoopClosures, n_poses: int, display: str) -> None:
     )
     if problems:
         raise DiveFormatError(problems)
+
+
+def _smallest_eigenvalues(C: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Each covariance's smallest eigenvalue; NaN where it has none (values too large to decompose)."""
+    out = np.full(len(C), np.nan)
+    sane = np.isfinite(C).all(axis=(1, 2)) & (np.abs(C).max(axis=(1, 2), initial=0.0) < 1e150)
+    if not sane.any():
+        return out
+    try:
+        out[sane] = np.linalg.eigvalsh(C[sane])[:, 0]
+    except np.linalg.LinAlgError:
+        for k in np.flatnonzero(sane):
+            try:
+                out[k] = np.linalg.eigvalsh(C[k])[0]
+            except np.linalg.LinAlgError:
+                pass
+    return out
 
 
 #: Loop-file times may differ from the image times by this much, seconds.

@@ -100,7 +100,7 @@ def _inputs(dive: Path, settings: VisionSettings) -> dict[str, Path]:
 def _run(ctx: StageContext, settings: VisionSettings, out: Path) -> dict[str, Any]:
     from auvnav.vision.loops import find_loops
 
-    dive = read_dive(ctx.dive)
+    dive = read_dive(ctx.dive, allow_outside=ctx.allow_outside)
     result = find_loops(
         dive,
         read_prior(ctx.dive),
@@ -125,6 +125,8 @@ def format_summary(summary: dict[str, Any]) -> str:
     ]
     for reason, n in sorted(summary["rejected"].items(), key=lambda kv: -kv[1]):
         lines.append(f"  rejected: {reason}: {n}")
+    if summary.get("altitude_source") == "stereo":
+        lines.append("  image footprints from the stereo range: nav/dvl has no altitude")
     lines.append(
         f"{summary['elapsed_s']:.0f} s, {summary['pairs_per_s']:.1f} stereo pairs/s "
         f"({summary['executor']}, {summary['workers']} workers)"
