@@ -44,6 +44,19 @@ def _load_samples_module() -> ModuleType:
 
 bad_input = _load_samples_module()
 
+
+def _load_writers_module() -> ModuleType:
+    """``tests/io/io_writers.py``: the independent writers of the vendor formats."""
+    name = "auvnav_tests_io_writers"
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, Path(__file__).parent / "io" / "io_writers.py")
+        assert spec is not None and spec.loader is not None
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+    return sys.modules[name]
+
+
 #: Examples per reader, when set: the long run for a benchmark (the default is :attr:`Reader.examples`,
 #: about a second or two of each reader).
 EXAMPLES = int(os.environ["AUVNAV_FUZZ_EXAMPLES"]) if os.environ.get("AUVNAV_FUZZ_EXAMPLES") else None
@@ -282,6 +295,23 @@ def _read_settings(path: Path, work: Path) -> object:
     ]
 
 
+def _importer(fmt: str, log: str, config: str | None = None) -> Reader:
+    """An importer of :mod:`auvnav.io` under fuzz: one of its logs (under ``logs/``) mutated, imported
+    into a new dive with the sample dive as the base (what the log lacks)."""
+
+    def read(path: Path, work: Path) -> object:
+        from auvnav.io import import_dive
+
+        settings = None if config is None else work / "logs" / config
+        return import_dive(
+            fmt, [path], work / "imported", config=settings, base=work / "dive", overwrite=True
+        )
+
+    return Reader(
+        f"import {fmt}", lambda s: s.root / "logs" / log, lambda w: w / "logs" / log, read, examples=25
+    )
+
+
 #: Every reader under fuzz. Add a row for a new reader.
 READERS: list[Reader] = [
     _in_dive("dive.yaml"),
@@ -311,6 +341,10 @@ READERS: list[Reader] = [
     Reader("ros camera_info", lambda s: s.ros_left, lambda w: w / "left.yaml", _read_ros),
     Reader("opencv calibration", lambda s: s.opencv, lambda w: w / "stereo.yml", _read_opencv),
     Reader("settings", lambda s: s.settings, lambda w: w / "settings.yaml", _read_settings),
+    _importer("acfr-raw", "combined.RAW.auv"),
+    _importer("pd0", "dvl.pd0", "pd0.yaml"),
+    _importer("nmea", "gps.log"),
+    _importer("csv", "csv/dvl_log.csv", "csv/mapping.yaml"),
 ]
 #: Examples each reader ran in this session (printed with -s).
 RAN: dict[str, int] = {}
@@ -318,7 +352,20 @@ RAN: dict[str, int] = {}
 
 @pytest.fixture(scope="module")
 def samples(tmp_path_factory: pytest.TempPathFactory):
-    return bad_input.write_samples(tmp_path_factory.mktemp("samples"), seconds=20.0, rate_hz=2.0)
+    s = bad_input.write_samples(tmp_path_factory.mktemp("samples"), seconds=20.0, rate_hz=2.0)
+    writers = _load_writers_module()
+    dive = bad_input.small_dive(20.0, 2.0)
+    logs = s.root / "logs"
+    logs.mkdir()
+    raw, _ = writers.write_acfr(dive, logs)  # combined.RAW.auv and mission.cfg beside it
+    raw.rename(logs / "combined.RAW.auv")
+    writers.write_pd0(dive, logs / "dvl.pd0")
+    (logs / "pd0.yaml").write_text(
+        "origin: {latitude_deg: -14.05, longitude_deg: 121.78}\n", encoding="utf-8"
+    )
+    writers.write_nmea(dive, logs / "gps.log")
+    writers.write_csvs(dive, logs / "csv")
+    return s
 
 
 def _check_lines(text: str, reader: str) -> None:

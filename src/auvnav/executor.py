@@ -173,7 +173,7 @@ class DaskExecutor(Executor):
         self._cluster = None
         if address.startswith("local:"):
             text = address.removeprefix("local:")
-            if not text.isdigit() or int(text) < 1:
+            if not (text.isascii() and text.isdigit()) or int(text) < 1:
                 raise ConfigError(f"--scheduler {address}: expected local:N with N a positive integer")
             self._cluster = LocalCluster(
                 n_workers=int(text),

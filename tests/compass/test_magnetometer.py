@@ -359,5 +359,5 @@ def test_noise_is_no_magnetometer_and_is_refused(method: str) -> None:
     rng = np.random.default_rng(3)
     m = rng.normal(0.0, 1e-5, (600, 3))
     tilt = rng.normal(0.0, 0.3, 600) if method == "ellipsoid" else np.zeros(600)
-    with pytest.raises(InsufficientDataError, match="do not (lie on an ellipsoid|determine)"):
+    with pytest.raises(InsufficientDataError, match=r"do not (lie on an ellipsoid|determine)"):
         calibrate_magnetometer(m, tilt, tilt[::-1].copy(), method=method)

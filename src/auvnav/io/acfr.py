@@ -45,6 +45,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field as PydanticField
 
+from auvnav.config import quote
 from auvnav.dive import AttitudeStream, DvlStream, GpsStream, UsblStream, read_dive
 from auvnav.errors import ConfigError, InsufficientDataError
 from auvnav.frames import GeodeticOrigin, ned2geodetic, rot2euler
@@ -118,7 +119,7 @@ def read_mission_cfg(path: Path) -> dict[str, Any]:
                     out[key] = dt.datetime.strptime(text, "%Y/%m/%d").replace(tzinfo=dt.timezone.utc)
                 except ValueError:
                     raise FormatError(
-                        path, f"MAG_VAR_DATE: not a date YYYY/MM/DD ({text!r})", line=line_no
+                        path, f"MAG_VAR_DATE: not a date YYYY/MM/DD ({quote(text)})", line=line_no
                     ) from None
             else:
                 out[key] = number(parts[1], path, line_no, key)
@@ -247,7 +248,7 @@ def parse_log(path: Path, log: _Log, counts: Counts, skip: set[str]) -> None:
                 continue
             raise FormatError(
                 path,
-                f"unknown line type {kind!r} (known: {', '.join(KNOWN)}; list it under skip: in --config "
+                f"unknown line type {quote(kind)} (known: {', '.join(KNOWN)}; list it under skip: in --config "
                 "to skip such lines)",
                 line=line_no,
             )

@@ -554,11 +554,15 @@ def assemble(
 
 
 def _iso(t_s: float) -> str:
-    return (
-        dt.datetime.fromtimestamp(t_s, dt.timezone.utc)
-        .isoformat(timespec="milliseconds")
-        .replace("+00:00", "Z")
-    )
+    """A time as ISO 8601 UTC; a time no calendar holds (the dive's checks then refuse it) as seconds."""
+    try:
+        return (
+            dt.datetime.fromtimestamp(t_s, dt.timezone.utc)
+            .isoformat(timespec="milliseconds")
+            .replace("+00:00", "Z")
+        )
+    except (OverflowError, OSError, ValueError):
+        return f"{t_s:.3f} s"
 
 
 def format_summary(summary: dict[str, Any]) -> str:

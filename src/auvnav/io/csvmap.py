@@ -61,6 +61,7 @@ import numpy as np
 import pandas as pd
 from pydantic import Field as PydanticField
 
+from auvnav.config import quote
 from auvnav.dive import (
     AttitudeStream,
     DvlStream,
@@ -180,7 +181,7 @@ class _Table:
         if "\x00" in text:
             raise FormatError(path, "not a text file (NUL byte: binary content)", byte=data.find(b"\x00"))
         if len(spec.delimiter) != 1:
-            raise ConfigError(f"{path.name}: delimiter must be one character; found {spec.delimiter!r}")
+            raise ConfigError(f"{path.name}: delimiter must be one character; found {quote(spec.delimiter)}")
         self.path = path
         lines = text.splitlines()
         self.header: list[str] | None = None
@@ -215,7 +216,7 @@ class _Table:
         if name not in self.header:
             raise FormatError(
                 self.path,
-                f"no column {name!r} (the mapping's {what}); the header has {', '.join(self.header)}",
+                f"no column {quote(name)} (the mapping's {what}); the header has {', '.join(self.header)}",
                 line=self._header_line(),
             )
         k = self.header.index(name)
@@ -232,11 +233,11 @@ class _Table:
                 out[k] = float(v)
             except ValueError:
                 raise FormatError(
-                    self.path, f"column {name}: not a number ({v!r})", line=self.line_of[k]
+                    self.path, f"column {name}: not a number ({quote(v)})", line=self.line_of[k]
                 ) from None
             if not math.isfinite(out[k]):
                 raise FormatError(
-                    self.path, f"column {name}: not a finite number ({v!r})", line=self.line_of[k]
+                    self.path, f"column {name}: not a finite number ({quote(v)})", line=self.line_of[k]
                 )
         return out
 
@@ -278,7 +279,7 @@ def _times(table: _Table, spec: TimeSpec) -> np.ndarray:
             if not _ZONE.search(v):
                 raise FormatError(
                     path,
-                    f"column {spec.column}: time {v!r} has no zone (give time.utc_offset_hours in the mapping)",
+                    f"column {spec.column}: time {quote(v)} has no zone (give time.utc_offset_hours in the mapping)",
                     line=table.line_of[k],
                 )
     parsed = pd.to_datetime(
@@ -288,7 +289,7 @@ def _times(table: _Table, spec: TimeSpec) -> np.ndarray:
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         raise FormatError(
-            path, f"column {spec.column}: not an ISO 8601 time ({text[k]!r})", line=table.line_of[k]
+            path, f"column {spec.column}: not an ISO 8601 time ({quote(text[k])})", line=table.line_of[k]
         )
     if spec.utc_offset_hours is None:
         seconds = (parsed.dt.tz_convert("UTC") - pd.Timestamp(0, tz="UTC")).dt.total_seconds()
@@ -327,7 +328,7 @@ def _field(table: _Table, stream: str, name: str, spec: ColumnSpec, kind: Kind) 
             b = _truth(v)
             if b is None:
                 raise FormatError(
-                    table.path, f"column {spec.column}: not a truth value ({v!r})", line=table.line_of[k]
+                    table.path, f"column {spec.column}: not a truth value ({quote(v)})", line=table.line_of[k]
                 )
             out[k] = b
         return out
@@ -339,7 +340,7 @@ def _field(table: _Table, stream: str, name: str, spec: ColumnSpec, kind: Kind) 
         units = UNITS[kind]
         if spec.unit not in units:
             raise ConfigError(
-                f"{table.path.name}: {what}: unit {spec.unit!r} is not a {kind} unit ({', '.join(u for u in units if u)}, counts)"
+                f"{table.path.name}: {what}: unit {quote(spec.unit)} is not a {kind} unit ({', '.join(u for u in units if u)}, counts)"
             )
         if spec.scale is not None:
             raise ConfigError(f"{table.path.name}: {what}: scale goes with unit counts")
@@ -350,7 +351,9 @@ def _field(table: _Table, stream: str, name: str, spec: ColumnSpec, kind: Kind) 
         try:
             values = np.full(n, float(spec.value))  # type: ignore[arg-type]
         except ValueError:
-            raise ConfigError(f"{table.path.name}: {what}: value {spec.value!r} is not a number") from None
+            raise ConfigError(
+                f"{table.path.name}: {what}: value {quote(spec.value)} is not a number"
+            ) from None
     return values * factor + spec.offset
 
 

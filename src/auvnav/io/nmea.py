@@ -102,9 +102,9 @@ def _logger_time(prefix: str) -> float | None:
 
 def _tod(text: str) -> float:
     """Seconds of the day of ``hhmmss(.sss)``."""
-    if len(text) < 6 or not text[:6].isdigit():
+    if len(text) < 6 or not (text[:6].isascii() and text[:6].isdigit()):
         raise _Skip("truncated sentences (a field is missing or empty)")
-    h, m, s = int(text[:2]), int(text[2:4]), float(text[4:])
+    h, m, s = int(text[:2]), int(text[2:4]), _float(text[4:])
     if h > 23 or m > 59 or s >= 61:
         raise _Skip("sentences with an impossible time of day")
     return h * 3600 + m * 60 + s
@@ -133,7 +133,7 @@ def _float(value: str) -> float:
 
 
 def _date(ddmmyy: str) -> dt.date:
-    if len(ddmmyy) != 6 or not ddmmyy.isdigit():
+    if len(ddmmyy) != 6 or not (ddmmyy.isascii() and ddmmyy.isdigit()):
         raise _Skip("truncated sentences (a field is missing or empty)")
     d, m, y = int(ddmmyy[:2]), int(ddmmyy[2:4]), int(ddmmyy[4:])
     try:

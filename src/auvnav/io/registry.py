@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from types import ModuleType
 from typing import Any
 
+from auvnav.config import quote
 from auvnav.errors import ConfigError
 
 
@@ -105,12 +106,12 @@ EXPORTERS: dict[str, FormatInfo] = {
 def importer(name: str) -> FormatInfo:
     """The importer of a format; :class:`ConfigError` naming the known ones otherwise."""
     if name not in IMPORTERS:
-        raise ConfigError(f"unknown import format {name!r}; known: {', '.join(IMPORTERS)}")
+        raise ConfigError(f"unknown import format {quote(name)}; known: {', '.join(IMPORTERS)}")
     return IMPORTERS[name]
 
 
 def exporter(name: str) -> FormatInfo:
     """The exporter of a format; :class:`ConfigError` naming the known ones otherwise."""
     if name not in EXPORTERS:
-        raise ConfigError(f"unknown export format {name!r}; known: {', '.join(EXPORTERS)}")
+        raise ConfigError(f"unknown export format {quote(name)}; known: {', '.join(EXPORTERS)}")
     return EXPORTERS[name]

@@ -39,6 +39,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from auvnav.config import quote
 from auvnav.dive import AttitudeStream, DvlStream, GpsStream, PressureStream
 from auvnav.errors import ConfigError
 from auvnav.frames import quat_wxyz2rot, rot2euler
@@ -99,7 +100,7 @@ def _choose(connections: list[Any], settings: RosbagSettings) -> dict[str, Any]:
         if topic is not None:
             if topic not in by_topic:
                 raise ConfigError(
-                    f"rosbag: {role}: no topic {topic!r} in the bag (topics: {', '.join(sorted(by_topic))})"
+                    f"rosbag: {role}: no topic {quote(topic)} in the bag (topics: {', '.join(sorted(by_topic))})"
                 )
             conns = by_topic[topic]
             if conns[0].msgtype not in types:
@@ -176,7 +177,7 @@ def _write_raw(path: Path, msg: Any) -> None:
     }
     if enc not in channels:
         raise ConfigError(
-            f"rosbag: image encoding {msg.encoding!r} is not supported (mono8/16, bgr8, rgb8, bgra8, rgba8)"
+            f"rosbag: image encoding {quote(msg.encoding)} is not supported (mono8/16, bgr8, rgb8, bgra8, rgba8)"
         )
     dtype = np.uint16 if "16" in enc else np.uint8
     row = np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(msg.height, msg.step)
