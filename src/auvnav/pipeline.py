@@ -40,6 +40,7 @@ from auvnav import __version__
 from auvnav import products as P
 from auvnav.compass.stage import STAGE as COMPASS
 from auvnav.depth.stage import STAGE as DEPTH
+from auvnav.dive import outside_inputs
 from auvnav.errors import AuvnavError, ConfigError, InsufficientDataError
 from auvnav.executor import Executor, make_executor
 from auvnav.nav.stage import STAGE as NAV
@@ -126,9 +127,17 @@ def _fingerprint(settings: Any) -> dict[str, Any]:
     return out
 
 
-def stage_key(stage: Stage, dive: Path, settings: Any, hashes: FileHashes) -> tuple[str, dict[str, Any]]:
-    """The stage's key and what it is made of (``settings``, ``inputs``, ``version``)."""
-    inputs = {label: hashes.digest(path) for label, path in sorted(stage.inputs(dive, settings).items())}
+def stage_key(
+    stage: Stage, dive: Path, settings: Any, hashes: FileHashes, *, allow_outside: bool = False
+) -> tuple[str, dict[str, Any]]:
+    """The stage's key and what it is made of (``settings``, ``inputs``, ``version``).
+
+    The dive's files that lead outside its folder are hashed only with ``allow_outside``.
+    """
+    files = stage.inputs(dive, settings)
+    if allow_outside:
+        files = outside_inputs(dive, files)
+    inputs = {label: hashes.digest(path) for label, path in sorted(files.items())}
     material = {
         "stage": stage.name,
         "version": __version__,
@@ -200,7 +209,7 @@ def dive_lock(dive: Path) -> Iterator[None]:
         fh = open(root / LOCK_FILE, "a+")
     except PermissionError as err:
         raise AuvnavError(f"{root}: not writable ({err.strerror})") from err
-    except NotADirectoryError as err:
+    except (NotADirectoryError, FileExistsError) as err:
         raise AuvnavError(f"{root}: exists and is not a folder") from err
     try:
         try:
@@ -258,6 +267,7 @@ def process(
     workers: int | None = None,
     say: Callable[[str], None] | None = None,
     progress: Progress | None = None,
+    allow_outside: bool = False,
 ) -> RunResult:
     """Run every stage the dive's data allows (module docstring).
 
@@ -283,6 +293,8 @@ def process(
         Called with a line as each stage starts and ends.
     progress : callable(what, done, total), optional
         Per-item progress inside a stage.
+    allow_outside : bool
+        Read the files the dive names outside its folder (each is said); otherwise they are errors.
     """
     dive = Path(dive)
     if not dive.is_dir():
@@ -293,9 +305,9 @@ def process(
     skip = dict(skip or {})
     result = RunResult(str(dive))
     if dry_run:
-        _plan(dive, chosen, selected, force, skip, result, say)
+        _plan(dive, chosen, selected, force, skip, result, say, allow_outside)
         return result
-    with _session(dive, scheduler, workers, progress) as (ctx, hashes):
+    with _session(dive, scheduler, workers, progress, allow_outside) as (ctx, hashes):
         blocked: dict[str, str] = {}
         for stage in STAGES:
             outcome = _one(stage, ctx, chosen[stage.name], selected, force, skip, blocked, hashes, say)
@@ -329,7 +341,7 @@ def _one(
     if reason:
         say(f"{stage.name}: skipped ({reason})")
         return Outcome(stage.name, "skipped", reason)
-    key, material = stage_key(stage, dive, settings, hashes)
+    key, material = stage_key(stage, dive, settings, hashes, allow_outside=ctx.allow_outside)
     record = P.read_record(dive, stage.name)
     stale = "forced" if force else _why_stale(record, key, material)
     if not stale and record is not None:
@@ -386,7 +398,11 @@ def _execute(
 
 @contextlib.contextmanager
 def _session(
-    dive: Path, scheduler: str | None, workers: int | None, progress: Progress | None
+    dive: Path,
+    scheduler: str | None,
+    workers: int | None,
+    progress: Progress | None,
+    allow_outside: bool = False,
 ) -> Iterator[tuple[StageContext, FileHashes]]:
     """The dive locked and swept, its file hashes, and an executor made on first use (closed after)."""
     executor: Executor | None = None
@@ -401,7 +417,7 @@ def _session(
         _sweep(dive)
         hashes = FileHashes(P.cache_dir(dive, "") / HASHES_FILE)
         try:
-            yield StageContext(dive, get_executor, progress), hashes
+            yield StageContext(dive, get_executor, progress, allow_outside), hashes
         finally:
             hashes.save()
             if executor is not None:
@@ -416,8 +432,11 @@ def run_stage(
     scheduler: str | None = None,
     workers: int | None = None,
     progress: Progress | None = None,
+    allow_outside: bool = False,
 ) -> dict[str, Any]:
     """Run one stage now, whatever its key says (the stage's own command); its summary.
+
+    ``allow_outside`` lets the stage read files the dive names outside its folder (each is said).
 
     Raises
     ------
@@ -434,8 +453,8 @@ def run_stage(
     reason = stage.unavailable(dive, settings)
     if reason:
         raise InsufficientDataError(f"{dive}: {stage.name}: {reason}")
-    with _session(dive, scheduler, workers, progress) as (ctx, hashes):
-        key, material = stage_key(stage, dive, settings, hashes)
+    with _session(dive, scheduler, workers, progress, allow_outside) as (ctx, hashes):
+        key, material = stage_key(stage, dive, settings, hashes, allow_outside=allow_outside)
         summary, status, why = _execute(stage, ctx, settings, key, material)
     if status == "skipped":
         raise InsufficientDataError(f"{dive}: {stage.name}: {why}")
@@ -450,6 +469,7 @@ def _plan(
     skip: dict[str, str],
     result: RunResult,
     say: Callable[[str], None],
+    allow_outside: bool = False,
 ) -> None:
     """``--dry-run``: what each stage would do, with no file written.
 
@@ -466,7 +486,7 @@ def _plan(
         if reason:
             outcome = Outcome(stage.name, "skipped", reason)
         else:
-            key, material = stage_key(stage, dive, settings, hashes)
+            key, material = stage_key(stage, dive, settings, hashes, allow_outside=allow_outside)
             stale = "forced" if force else _why_stale(P.read_record(dive, stage.name), key, material)
             outcome = Outcome(stage.name, "would run" if stale else "up to date", stale)
         say(f"{stage.name}: {outcome.status}" + (f" ({outcome.reason})" if outcome.reason else ""))

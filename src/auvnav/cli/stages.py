@@ -10,6 +10,7 @@ from typing import Annotated, Any
 import typer
 
 from auvnav.cli.common import (
+    AllowOutsideOpt,
     DiveArg,
     JsonOpt,
     QuietOpt,
@@ -134,6 +135,7 @@ def process(
         Path | None,
         typer.Option("--tide", help="Tide constituent file for every stage that takes one (slam, depth)."),
     ] = None,
+    allow_outside: AllowOutsideOpt = False,
     workers: WorkersOpt = None,
     scheduler: SchedulerOpt = None,
     as_json: JsonOpt = False,
@@ -149,7 +151,10 @@ def process(
     values: dict[str, dict[str, Any]] = {}
     if settings_file is not None:  # file settings are relative to the settings file's folder
         for name, given in _settings_file(settings_file).items():
-            stage = stage_named(name)
+            try:
+                stage = stage_named(name)
+            except ConfigError as err:
+                raise ConfigError(f"{settings_file}: {err}") from None
             values[stage.name] = dataclasses.asdict(
                 make_settings(stage.settings, given, f"{settings_file}: {name}", base=settings_file.parent)
             )
@@ -180,6 +185,7 @@ def process(
             workers=workers,
             say=say,
             progress=progress,
+            allow_outside=allow_outside,
         )
     lines = [f"{dive}: " + ", ".join(f"{o.stage} {o.status}" for o in result.outcomes)]
     for o in result.failed:
