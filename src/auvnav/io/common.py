@@ -75,6 +75,8 @@ log = logging.getLogger(__name__)
 FloatArray = NDArray[np.float64]
 DBAR = 1e4  # Pa per dbar
 STANDARD_ATMOSPHERE_DBAR = 10.1325
+#: A logged depth this far above the sea surface (metres) is not a depth (a sign or unit mistake).
+ABOVE_SURFACE_M = 5.0
 HeadingReference = Literal["magnetic", "true"]
 PressureType = Literal["absolute", "sea"]
 
@@ -410,6 +412,13 @@ def _depth_to_pressure(imported: Imported, origin: GeodeticOrigin) -> Stream | N
     if imported.depth is None:
         return None
     t, depth = imported.depth
+    above = np.asarray(depth, float) < -ABOVE_SURFACE_M
+    if above.any():
+        k = int(np.flatnonzero(above)[0])
+        raise InsufficientDataError(
+            f"depth record: {int(above.sum())} depth(s) more than {ABOVE_SURFACE_M:g} m above the sea surface "
+            f"(first {float(depth[k]):.6g} m at t = {float(t[k]):.6f} s): depth in metres, positive down, expected"
+        )
     return PressureStream(
         t_s=np.asarray(t, float), pressure_pa=pressure_from_depth(depth, origin.latitude_rad)
     )
