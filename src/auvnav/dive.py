@@ -518,11 +518,19 @@ def image_files(path: Path, index: ImageIndex, *, allow_outside: bool = False) -
     lead outside it are left out unless ``allow_outside``."""
     path = Path(path)
     out = {}
+    inside_dir: dict[Path, bool] = {}  # resolved once per folder: thousands of images share a few
     for name in (*index.left, *index.right):
-        rel = f"images/{name}"
+        rel = Path("images", name)
         file = path / rel
-        if _is_file(file) and (allow_outside or outside(path, Path(rel)) is None):
-            out[rel] = file
+        if not _is_file(file):
+            continue
+        if not allow_outside:
+            if rel.parent not in inside_dir:
+                inside_dir[rel.parent] = outside(path, rel.parent) is None
+            inside = inside_dir[rel.parent] and (not file.is_symlink() or outside(path, rel) is None)
+            if not inside:
+                continue
+        out[f"images/{name}"] = file
     return out
 
 
