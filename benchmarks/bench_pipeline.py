@@ -99,7 +99,8 @@ def main() -> None:
         ]
         subprocess.run([*command, "--overwrite", "-q", "--json", *cut], check=True, stdout=subprocess.DEVNULL)
 
-    reference = args.work / "reference"
+    # Every copy is named as the simulated dive: products carry the dive's folder name.
+    reference = args.work / "reference" / simulated.name
     shutil.rmtree(reference, ignore_errors=True)
     shutil.copytree(simulated, reference)
     full_s, first = process(reference)
@@ -114,7 +115,7 @@ def main() -> None:
     rng = random.Random(args.seed)
     rows = []
     for k in range(args.kills):
-        dive = args.work / f"killed-{k}"
+        dive = args.work / f"killed-{k}" / simulated.name
         shutil.rmtree(dive, ignore_errors=True)
         shutil.copytree(simulated, dive)
         at = rng.uniform(0.02, 0.98) * full_s
