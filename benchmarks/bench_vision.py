@@ -13,7 +13,11 @@ Steps (simulation, rendering and navigation are skipped when their outputs alrea
 4. the same throughput on the first ``--speed-seconds`` of the same dive rendered at full scale;
    peak memory of each loop stage (the stage and its worker processes together).
 
-Usage: ``.venv/bin/python benchmarks/bench_vision.py [--work DIR] [--image-scale 0.5]``.
+Usage: ``.venv/bin/python benchmarks/bench_vision.py [--work DIR] [--image-scale 0.5] [--water clear]
+[--speed-seconds 900] [--set NAME=VALUE ...]``: ``--water coastal|turbid`` renders the dive in that
+water (``auvnav simulate --water``; the work folder gets a folder per water), ``--speed-seconds 0``
+skips step 4, ``--set`` gives the loop stage's settings (``auvnav loops --help``), e.g.
+``--set features=2000``.
 """
 
 from __future__ import annotations
@@ -45,7 +49,7 @@ def run(args: list[str]) -> None:
     subprocess.run([str(a) for a in args], check=True, cwd=ROOT)
 
 
-def render(dive: Path, scale: float, seconds: float | None) -> dict[str, float]:
+def render(dive: Path, scale: float, seconds: float | None, water: str = "clear") -> dict[str, float]:
     """Simulate and render a dive (when absent); the rendering speed."""
     from auvnav.executor import make_executor
     from auvnav.sim.camera import render_dive_images
@@ -58,12 +62,12 @@ def render(dive: Path, scale: float, seconds: float | None) -> dict[str, float]:
         return {}
     started = time.perf_counter()
     with make_executor() as executor:
-        images = render_dive_images(dive, scale=scale, executor=executor)
+        images = render_dive_images(dive, scale=scale, water=water, executor=executor)  # type: ignore[arg-type]
     elapsed = time.perf_counter() - started
     return {"rendered_pairs": len(images), "render_s": elapsed, "render_pairs_per_s": len(images) / elapsed}
 
 
-def loops(dive: Path, usage: TreeUsage, *, fresh: bool) -> dict[str, float]:
+def loops(dive: Path, usage: TreeUsage, *, fresh: bool, settings: object = None) -> dict[str, float]:
     """Navigate (when needed), run the loop stage (from an empty cache when ``fresh``), evaluate.
 
     ``cores_busy_features`` and ``cores_busy_verify``: the stage's CPU time over its wall time and the
@@ -92,7 +96,7 @@ def loops(dive: Path, usage: TreeUsage, *, fresh: bool) -> dict[str, float]:
             last[0] = now
 
     start = (time.perf_counter(), usage.cpu_s())
-    summary = run_stage(dive, "vision", progress=progress)
+    summary = run_stage(dive, "vision", settings, progress=progress)
     end = marks["end"]
     cores = os.cpu_count() or 1
     busy = {
@@ -181,24 +185,41 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--work", type=Path, default=Path("/tmp/auvnav-bench-vision"))
     parser.add_argument("--image-scale", type=float, default=0.5)
-    parser.add_argument("--speed-seconds", type=float, default=900.0)
+    parser.add_argument("--speed-seconds", type=float, default=900.0, help="0: no full-scale run")
+    parser.add_argument("--water", choices=("clear", "coastal", "turbid"), default="clear")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
     args = parser.parse_args()
+    from auvnav.config import parse_yaml
+    from auvnav.stagekit import make_settings
+    from auvnav.vision.stage import VisionSettings
+
+    values = {k: parse_yaml(v, "--set")[0] for k, _, v in (item.partition("=") for item in args.set)}
+    settings = make_settings(VisionSettings, values, "--set")
     args.work.mkdir(parents=True, exist_ok=True)
     print(f"cores {os.cpu_count()}, load average {os.getloadavg()}", flush=True)
 
-    dive = args.work / "navcheck"
-    results: dict[str, object] = {"image_scale": args.image_scale, "load_average": os.getloadavg()}
-    results.update(render(dive, args.image_scale, None))
+    water = "" if args.water == "clear" else f"-{args.water}"
+    dive = args.work / f"navcheck{water}"
+    results: dict[str, object] = {
+        "image_scale": args.image_scale,
+        "water": args.water,
+        "settings": values,
+        "load_average": os.getloadavg(),
+    }
+    results.update(render(dive, args.image_scale, None, args.water))
     with TreeUsage() as usage:
-        results["half"] = loops(dive, usage, fresh=True)
+        results["half"] = loops(dive, usage, fresh=True, settings=settings)
     results["half_peak_memory_mib"] = usage.peak_mib
-    cut = args.work / f"navcheck-{args.speed_seconds:.0f}s-x1"
-    results["full_render"] = render(cut, 1.0, args.speed_seconds)
-    with TreeUsage() as usage:
-        results["full"] = loops(cut, usage, fresh=True)
-    results["full_peak_memory_mib"] = usage.peak_mib
+    if args.speed_seconds > 0:
+        cut = args.work / f"navcheck{water}-{args.speed_seconds:.0f}s-x1"
+        results["full_render"] = render(cut, 1.0, args.speed_seconds, args.water)
+        with TreeUsage() as usage:
+            results["full"] = loops(cut, usage, fresh=True, settings=settings)
+        results["full_peak_memory_mib"] = usage.peak_mib
     results["load_average_end"] = os.getloadavg()
-    (args.work / "results.json").write_text(json.dumps(results, indent=2, default=float), encoding="utf-8")
+    (args.work / f"results{water}.json").write_text(
+        json.dumps(results, indent=2, default=float), encoding="utf-8"
+    )
     print(json.dumps(results, indent=2, default=float))
     half = results["half"]
     assert isinstance(half, dict)
@@ -209,6 +230,8 @@ def main() -> None:
         print(f"  {key:32s} {value:10.4g}  target {op} {target:<6g} {'ok' if ok else 'MISSED'}")
     print(f"  {'mahalanobis_mean (about 6)':32s} {half.get('mahalanobis_mean', float('nan')):10.4g}")
     for name in ("half", "full"):
+        if name not in results:
+            continue
         speed = results[name]
         assert isinstance(speed, dict)
         target = " (target >= 8)" if name == "half" else ""

@@ -54,7 +54,7 @@ def test_every_stage_the_data_allows_runs(processed) -> None:
     dive, outcomes = processed
     assert [s.name for s in STAGES] == list(outcomes)
     ran = {name for name, o in outcomes.items() if o.status == "ran"}
-    assert ran == {"nav", "vision", "slam", "depth", "report"}
+    assert ran == {"nav", "vision", "slam", "depth", "coverage", "recon", "report"}
     # Two arms of a star: the compass rose is not covered, so no correction is made, and it says why.
     assert outcomes["compass"].status == "skipped" and "compass rose" in outcomes["compass"].reason
     for name in ran:
@@ -68,7 +68,8 @@ def test_process_makes_the_products_the_commands_make(simulated: Path, processed
     dive, _ = processed
     separate = tmp_path / "navcheck"
     shutil.copytree(simulated, separate)
-    for command in (["navigate"], ["loops", "--workers", "2"], ["slam"], ["depth"]):
+    commands = (["navigate"], ["loops", "--workers", "2"], ["slam"], ["depth"], ["coverage"], ["recon"])
+    for command in commands:
         assert main([command[0], str(separate), *command[1:], "-q", "--json"]) == 0
     ours, theirs = _files(dive), _files(separate)
     assert set(ours) == set(theirs) and len(ours) > 10
@@ -85,6 +86,8 @@ def test_a_rerun_skips_what_is_up_to_date(processed) -> None:
         "slam": "up to date",
         "compass": "skipped",
         "depth": "up to date",
+        "coverage": "up to date",
+        "recon": "up to date",
         "report": "up to date",
     }
     assert _files(dive) == before

@@ -1,3 +1,3 @@
 """auvnav: consistent navigation for survey AUVs with cheap navigation."""
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"

@@ -20,6 +20,7 @@ interpolated there (estimate samples outside the truth's span are left out, with
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 from collections.abc import Callable
@@ -170,6 +171,22 @@ def _slam(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, An
     return scores
 
 
+def _online(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, Any] | None:
+    """The SLAM estimate as the vehicle knew it at each moment (``slam/online.csv``, ``--online``) and
+    the time per pose of its updates (``slam/summary.json``)."""
+    path = P.SLAM_ONLINE.path(dive_path)
+    if not path.is_file():
+        return None
+    score = score_trajectory(truth, read_trajectory(path), distance_m, str(path))
+    scores: dict[str, Any] = {"ate_aligned_rmse_m": score.ate_aligned_rmse_m, "ate_rmse_m": score.ate_rmse_m}
+    summary = P.SLAM_SUMMARY.path(dive_path)
+    online = json.loads(summary.read_text(encoding="utf-8")).get("online") if summary.is_file() else None
+    if online:
+        for key in ("update_median_ms", "update_p95_ms", "update_max_ms", "loop_delay_median_s"):
+            scores[key] = online[key]
+    return scores
+
+
 def _loops(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, Any] | None:
     """Visual loop closures against the truly overlapping pairs (:mod:`auvnav.vision.evaluate`)."""
     from auvnav.vision.evaluate import loops_section
@@ -184,14 +201,77 @@ def _depth(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, A
     return depth_section(dive_path)
 
 
+def _coverage(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, Any] | None:
+    """Coverage, gaps and line spacing against the truth's (:mod:`auvnav.coverage.evaluate`), the
+    true footprints on the simulator's seafloor."""
+    from auvnav.coverage.evaluate import coverage_section
+
+    if not P.COVERAGE_SUMMARY.path(dive_path).is_file():
+        return None
+    floor = None
+    truth_yaml = Path(dive_path) / "truth" / "truth.yaml"
+    if truth_yaml.is_file():
+        from auvnav.sim.camera import seafloor_from_truth
+
+        floor = seafloor_from_truth(truth_yaml)
+    return coverage_section(dive_path, truth, floor)
+
+
+def _recon(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, Any] | None:
+    """The reconstruction against the simulator's seafloor and albedo (:mod:`auvnav.recon.evaluate`):
+    DEM error, orthophoto misregistration, false relief before and after the tide (DESIGN keys first)."""
+    from auvnav.recon.evaluate import recon_section
+
+    truth_yaml = Path(dive_path) / "truth" / "truth.yaml"
+    if not P.RECON_SUMMARY.path(dive_path).is_file() or not truth_yaml.is_file():
+        return None
+    floor, texture = _seafloor_and_texture(truth_yaml)
+    scores = recon_section(dive_path, truth, floor, texture, align_yaw_translation)
+    if scores is None:
+        return None
+    first = [
+        "dem_rmse_m", "mosaic_misregistration_median_px", "mosaic_misregistration_p95_px",
+        "relief_step_before_m", "relief_step_after_m",
+    ]  # fmt: skip
+    return {**{k: scores.get(k) for k in first}, **{k: v for k, v in scores.items() if k not in first}}
+
+
+def evaluate_recon(dive_path: Path, *, folder: Path | None = None) -> dict[str, Any] | None:
+    """The ``recon`` section for a reconstruction in ``folder`` (default the dive's own products)."""
+    from auvnav.recon.evaluate import recon_section
+
+    truth_yaml = Path(dive_path) / "truth" / "truth.yaml"
+    if not truth_yaml.is_file():
+        return None
+    floor, texture = _seafloor_and_texture(truth_yaml)
+    return recon_section(
+        dive_path, read_truth(dive_path), floor, texture, align_yaw_translation, folder=folder
+    )
+
+
+def _seafloor_and_texture(truth_yaml: Path) -> tuple[Any, Any]:
+    """The simulated seafloor and albedo of a dive (the images are rendered with the dive's seed)."""
+    from auvnav.config import load_yaml
+    from auvnav.sim.camera import seafloor_from_truth
+    from auvnav.sim.texture import SeafloorTexture
+
+    data, _ = load_yaml(truth_yaml, str(truth_yaml))
+    seed = data.get("seed") if isinstance(data, dict) else None
+    texture = SeafloorTexture(seed=int(seed)) if isinstance(seed, int) else None
+    return seafloor_from_truth(truth_yaml), texture
+
+
 #: Sections in output order (DESIGN section 7): name -> scorer (None when its products are absent).
 SECTIONS: dict[str, Section] = {
     "dr": trajectory_section(P.NAV_DR),
     "filter": trajectory_section(P.NAV_FILTER),
     "slam": _slam,
+    "online": _online,
     "loops": _loops,
     "compass": _compass,
     "depth": _depth,
+    "coverage": _coverage,
+    "recon": _recon,
 }
 
 
@@ -203,6 +283,181 @@ def read_truth(dive_path: Path) -> Trajectory:
             [Problem(str(path), "not found: only simulated dives have a truth to score against")]
         )
     return read_trajectory(path)
+
+
+#: Inter-dive scores compare images of two dives whose true positions lie within this distance
+#: (horizontal, metres): the overlap, where the dives' footprints share most of their area.
+OVERLAP_RADIUS_M = 0.5
+#: An inter-dive loop closure is true when its relative pose is within these of the truth's.
+TRUE_LOOP_TRANSLATION_M = 0.1
+TRUE_LOOP_ROTATION_DEG = 1.0
+
+
+def evaluate_campaign(folder: Path) -> dict[str, Any]:
+    """The ``campaign`` section of a campaign folder (:mod:`auvnav.campaign`), its dives simulated.
+
+    - ``inter_dive_rmse_m``: over every pair of images of two dives whose true positions lie within
+      :data:`OVERLAP_RADIUS_M` of each other (each image of the later dive with its nearest of the
+      earlier), the root mean square of the 3D error of their relative position in the common frame
+      (``inter_dive_horizontal_rmse_m``: north and east only);
+    - ``inter_dive_loop_precision``: the kept inter-dive loop closures whose relative pose is within
+      :data:`TRUE_LOOP_TRANSLATION_M` and :data:`TRUE_LOOP_ROTATION_DEG` of the truth's, over all kept;
+      ``inter_dive_loops_kept``, ``inter_dive_false_kept``, ``inter_dive_false_rejected``.
+    """
+    import pandas as pd
+    from scipy.spatial import cKDTree
+
+    from auvnav.campaign import INTER_DIVE_LOOPS_FILE, read_campaign
+    from auvnav.frames import se3
+
+    info = read_campaign(folder)
+    dives = info["dives"]
+    est: dict[str, Trajectory] = {}
+    true: dict[str, Trajectory] = {}
+    distance = 0.0
+    for d in dives:
+        truth = read_truth(Path(d["path"]))
+        distance += truth.distance_m()
+        estimate = read_trajectory(Path(folder) / "dives" / d["name"] / "trajectory.csv")
+        ref = truth.interpolate(estimate.t_s)
+        offset = np.array([d["offset_ned_m"][0], d["offset_ned_m"][1], 0.0])
+        true[d["name"]] = Trajectory(
+            t_s=ref.t_s, p_ned_m=ref.p_ned_m + offset, roll_rad=ref.roll_rad, pitch_rad=ref.pitch_rad,
+            yaw_rad=ref.yaw_rad,
+        )  # fmt: skip
+        est[d["name"]] = estimate
+    errors = []
+    for a in range(len(dives)):
+        for b in range(a + 1, len(dives)):
+            na, nb = dives[a]["name"], dives[b]["name"]
+            dist, nearest = cKDTree(true[na].p_ned_m[:, :2]).query(true[nb].p_ned_m[:, :2])
+            rows_b = np.flatnonzero(dist <= OVERLAP_RADIUS_M)
+            rows_a = nearest[rows_b]
+            d_est = est[nb].p_ned_m[rows_b] - est[na].p_ned_m[rows_a]
+            d_true = true[nb].p_ned_m[rows_b] - true[na].p_ned_m[rows_a]
+            errors.append(d_est - d_true)
+    error = np.concatenate(errors) if errors else np.zeros((0, 3))
+    loops = pd.read_csv(Path(folder) / INTER_DIVE_LOOPS_FILE)
+    good = np.zeros(len(loops), dtype=bool)
+    for (na, nb), group in loops.groupby(["dive_a", "dive_b"]):
+        ra, rb = group["row_a"].to_numpy(), group["row_b"].to_numpy()
+        Ta = se3(true[str(na)].R_ned_body[ra], true[str(na)].p_ned_m[ra])
+        Tb = se3(true[str(nb)].R_ned_body[rb], true[str(nb)].p_ned_m[rb])
+        T_true = np.linalg.inv(Ta) @ Tb
+        t_meas = group[["x_m", "y_m", "z_m"]].to_numpy()
+        yaw_true = np.arctan2(T_true[:, 1, 0], T_true[:, 0, 0])
+        yaw_err = np.degrees(np.abs(angle_diff(np.radians(group["yaw_deg"].to_numpy()), yaw_true)))
+        ok = (np.linalg.norm(t_meas - T_true[:, :3, 3], axis=1) < TRUE_LOOP_TRANSLATION_M) & (
+            yaw_err < TRUE_LOOP_ROTATION_DEG
+        )
+        good[group.index.to_numpy()] = ok
+    kept = loops["kept"].to_numpy().astype(bool)
+    change = _campaign_change(Path(folder), info, est, true)
+    return {
+        "inter_dive_rmse_m": _rms_norm(error) if len(error) else math.nan,
+        "inter_dive_loop_precision": float(np.count_nonzero(kept & good) / max(np.count_nonzero(kept), 1)),
+        "inter_dive_horizontal_rmse_m": _rms_norm(error[:, :2]) if len(error) else math.nan,
+        "overlap_pairs": len(error),
+        "inter_dive_loops_kept": int(np.count_nonzero(kept)),
+        "inter_dive_false_kept": int(np.count_nonzero(kept & ~good)),
+        "inter_dive_false_rejected": int(np.count_nonzero(~kept & ~good)),
+        "inter_dive_true_rejected": int(np.count_nonzero(~kept & good)),
+        **change,
+        "distance_m": distance,
+    }
+
+
+def _true_changed_area(
+    folder: Path,
+    info: dict[str, Any],
+    dive: dict[str, Any],
+    centre: FloatArray,
+    shift: FloatArray,
+    mound: dict[str, Any],
+    threshold: float,
+) -> float:
+    """Area of the DEM difference's observed cells (both DEMs there) near a removed mound (``centre``,
+    campaign frame) where the true seafloor changed by more than ``threshold``: the first dive's
+    seafloor against ``dive``'s, a cell's true position its campaign one less ``shift``."""
+    import rasterio
+
+    from auvnav.campaign import DEM_DIFFERENCE_FILE
+    from auvnav.frames import GeodeticOrigin
+    from auvnav.raster import map2ned
+    from auvnav.sim.camera import seafloor_from_truth
+
+    path = folder / DEM_DIFFERENCE_FILE
+    if not path.is_file():
+        return math.nan
+    with rasterio.open(path) as src:
+        diff, transform = src.read(1), src.transform
+    rows, cols = np.nonzero(np.isfinite(diff))
+    x, y = transform @ (cols + 0.5, rows + 0.5)
+    o = info["origin"]
+    origin = GeodeticOrigin(math.radians(o["latitude_deg"]), math.radians(o["longitude_deg"]), o["height_m"])
+    ne = map2ned(np.column_stack([x, y]), origin)
+    near = np.hypot(ne[:, 0] - centre[0], ne[:, 1] - centre[1]) <= mound["a_m"] + 0.5
+    first = info["dives"][0]
+    before = seafloor_from_truth(Path(first["path"]) / "truth" / "truth.yaml")
+    after = seafloor_from_truth(Path(dive["path"]) / "truth" / "truth.yaml")
+    pts = ne[near] - shift
+    change = after.depth_m(
+        pts[:, 0] - dive["offset_ned_m"][0], pts[:, 1] - dive["offset_ned_m"][1]
+    ) - before.depth_m(pts[:, 0] - first["offset_ned_m"][0], pts[:, 1] - first["offset_ned_m"][1])
+    return float(np.count_nonzero(np.abs(change) > threshold) * abs(transform.a * transform.e))
+
+
+def _campaign_change(
+    folder: Path, info: dict[str, Any], est: dict[str, Trajectory], true: dict[str, Trajectory]
+) -> dict[str, Any]:
+    """The DEM difference's changed regions (``changes.csv``) against the coral heads the simulator
+    removed (``truth/change.yaml`` of a dive): the largest region whose peak lies within the mound's
+    half-length of its centre, its area against the true one (the observed cells where the true
+    seafloor changed by more than the campaign's threshold, :func:`_true_changed_area`), its peak
+    change against the mound's height, and the largest region that matches none."""
+    import pandas as pd
+    import yaml
+
+    from auvnav.campaign import CHANGES_FILE
+
+    path = folder / CHANGES_FILE
+    if not path.is_file():
+        return {}
+    regions = pd.read_csv(path)
+    threshold = float(info["settings"]["change_threshold_m"])
+    matched = np.zeros(len(regions), dtype=bool)
+    out: dict[str, Any] = {}
+    for d in info["dives"]:
+        change_file = Path(d["path"]) / "truth" / "change.yaml"
+        if not change_file.is_file():
+            continue
+        for mound in yaml.safe_load(change_file.read_text(encoding="utf-8")).get("removed", []):
+            centre = np.array([mound["north_m"], mound["east_m"]]) + np.array(d["offset_ned_m"][:2])
+            # The campaign's frame against the truth's there (its GPS-referenced placement error):
+            # the first dive's estimate less the truth at its images within 6 m of the mound.
+            ref = info["dives"][0]["name"]
+            near_images = np.hypot(*(true[ref].p_ned_m[:, :2] - centre).T) <= 6.0
+            shift = np.zeros(2)
+            if np.any(near_images):
+                shift = np.median(
+                    est[ref].p_ned_m[near_images, :2] - true[ref].p_ned_m[near_images, :2], axis=0
+                )
+            centre = centre + shift
+            dist = np.hypot(regions["north_m"] - centre[0], regions["east_m"] - centre[1]).to_numpy()
+            near = dist <= max(mound["a_m"], 1.0)
+            true_area = _true_changed_area(folder, info, d, centre, shift, mound, threshold)
+            out["change_found"] = bool(np.any(near))
+            if np.any(near):
+                k = int(np.argmax(np.where(near, regions["area_m2"].to_numpy(), -1.0)))
+                matched |= near
+                out["change_area_m2"] = float(regions["area_m2"].iloc[k])
+                out["change_area_true_m2"] = true_area
+                out["change_height_m"] = float(abs(regions["height_change_m"].iloc[k]))
+                out["change_height_true_m"] = float(mound["height_m"])
+    if out:
+        others = regions["area_m2"].to_numpy()[~matched]
+        out["false_change_max_area_m2"] = float(others.max()) if len(others) else 0.0
+    return out
 
 
 def evaluate_dive(dive_path: Path, *, compass_correction: Path | None = None) -> dict[str, Any]:
@@ -223,6 +478,11 @@ def evaluate_dive(dive_path: Path, *, compass_correction: Path | None = None) ->
         products exist.
     """
     dive_path = Path(dive_path)
+    from auvnav.campaign import CAMPAIGN_FILE
+
+    if (dive_path / CAMPAIGN_FILE).is_file():  # a campaign folder: its section alone
+        campaign = evaluate_campaign(dive_path)
+        return {"distance_m": campaign.pop("distance_m"), "campaign": campaign}
     truth = read_truth(dive_path)
     distance = truth.distance_m()
     result: dict[str, Any] = {"distance_m": distance}

@@ -39,11 +39,13 @@ from typing import Any
 from auvnav import __version__
 from auvnav import products as P
 from auvnav.compass.stage import STAGE as COMPASS
+from auvnav.coverage.stage import STAGE as COVERAGE
 from auvnav.depth.stage import STAGE as DEPTH
 from auvnav.dive import outside_inputs
 from auvnav.errors import AuvnavError, ConfigError, InsufficientDataError
 from auvnav.executor import Executor, make_executor
 from auvnav.nav.stage import STAGE as NAV
+from auvnav.recon.stage import STAGE as RECON
 from auvnav.report.stage import STAGE as REPORT
 from auvnav.slam.stage import STAGE as SLAM
 from auvnav.stagekit import Progress, Stage, StageContext, StageSkipped, settings_mapping
@@ -53,7 +55,7 @@ from auvnav.vision.stage import STAGE as VISION
 log = logging.getLogger(__name__)
 
 #: Every stage, in the order they run.
-STAGES: tuple[Stage, ...] = (NAV, VISION, SLAM, COMPASS, DEPTH, REPORT)
+STAGES: tuple[Stage, ...] = (NAV, VISION, SLAM, COMPASS, DEPTH, COVERAGE, RECON, REPORT)
 BY_NAME: dict[str, Stage] = {s.name: s for s in STAGES}
 #: Other names a user may give a stage (its command's name).
 ALIASES = {"navigate": "nav", "loops": "vision"}

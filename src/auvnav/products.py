@@ -79,6 +79,7 @@ SLAM_TUM = Product("slam", "trajectory.tum")
 SLAM_GRAPH = Product("slam", "graph.g2o")
 SLAM_CORRECTION = Product("slam", "correction.yaml")  # the deviation estimated in the graph
 SLAM_SUMMARY = Product("slam", "summary.json")
+SLAM_ONLINE = Product("slam", "online.csv")  # the estimate as known at each moment (--online)
 # compass
 COMPASS_CORRECTION = Product("compass", "correction.yaml")
 COMPASS_PAIRS = Product("compass", "pairs.csv")
@@ -87,8 +88,26 @@ COMPASS_SUMMARY = Product("compass", "summary.json")
 DEPTH_LOOPS = Product("depth", "loop_depth.csv")
 DEPTH_TIDE_ESTIMATED = Product("depth", "tide_estimated.csv")
 DEPTH_SUMMARY = Product("depth", "summary.json")
+# coverage
+COVERAGE_TIF = Product("coverage", "coverage.tif")  # images per cell, GeoTIFF
+COVERAGE_PNG = Product("coverage", "coverage.png")
+COVERAGE_LINES = Product("coverage", "lines.csv")  # one row per adjacent line pair
+COVERAGE_SPACING = Product("coverage", "spacing.csv")  # each pair's spacing at its stations
+COVERAGE_GAPS = Product("coverage", "gaps.csv")
+COVERAGE_SUMMARY = Product("coverage", "summary.json")
+# recon (reconstruction)
+RECON_MESH = Product("recon", "mesh.ply")  # coloured TSDF mesh, east-north-up about the dive's origin
+RECON_DEM = Product("recon", "dem.tif")  # elevation and its 1-sigma, tiled GeoTIFF (UTM)
+RECON_MOSAIC = Product("recon", "mosaic.tif")  # orthophoto, tiled GeoTIFF (UTM)
+RECON_RELIEF = Product("recon", "relief.csv")  # the Fig. 11 check: steps between far-apart visits
+RECON_PAIRS = Product("recon", "pairs.csv")  # every stereo pair considered: placement and status
+RECON_SUMMARY = Product("recon", "summary.json")
 # report
 REPORT_FIGURES = Product("report", "figures")
+REPORT_INDEX = Product("report", "index.html")  # the self-contained page (no network)
+REPORT_MAP = Product("report", "map.json")  # the interactive map (plotly JSON), reused by a campaign's page
+REPORT_MESH = Product("report", "mesh3d.json")  # the decimated mesh's 3D view (plotly JSON)
+REPORT_SUMMARY = Product("report", "summary.json")  # facts, figures drawn and why the others were not
 
 #: Names of earlier releases, read with a deprecation warning for one release: old -> current.
 RENAMED: dict[str, Product] = {"products/slam/compass_correction.yaml": SLAM_CORRECTION}

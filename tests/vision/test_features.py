@@ -10,7 +10,8 @@ from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
 from auvnav.frames import euler2rot, se3
-from auvnav.sim.camera import camera_poses, default_stereo_rig, render_stereo_pair, scale_camera_rig
+from auvnav.sim.camera import camera_poses, default_stereo_rig, scale_camera_rig, to_grey
+from auvnav.sim.camera import render_stereo_pair as render_colour
 from auvnav.sim.texture import SeafloorTexture
 from auvnav.vision.camera import rectification
 from auvnav.vision.features import (
@@ -21,6 +22,12 @@ from auvnav.vision.features import (
     detect,
 )
 from auvnav.vision.stereo import stereo_features
+
+
+def render_stereo_pair(*args, **kwargs):
+    """The colour camera's pair as grey images, as the front end reads them."""
+    return tuple(to_grey(image) for image in render_colour(*args, **kwargs))
+
 
 # A location bias b shows as 2 b between the keypoints of an image and of the image turned by 180 degrees
 # (0.5 px with OpenCV's fast upscale uncorrected); the turn is exact, so a tolerance well below that.

@@ -8,9 +8,16 @@ import pytest
 
 from auvnav.errors import ConfigError
 from auvnav.frames import euler2rot, se3, se3_apply
-from auvnav.sim.camera import camera_poses, default_stereo_rig, render_stereo_pair, scale_camera_rig
+from auvnav.sim.camera import camera_poses, default_stereo_rig, scale_camera_rig, to_grey
+from auvnav.sim.camera import render_stereo_pair as render_colour
 from auvnav.sim.texture import SeafloorTexture
 from auvnav.vision.camera import check_image_size, pixel_rays, rectification, rectify_points, triangulate
+
+
+def render_stereo_pair(*args, **kwargs):
+    """The colour camera's pair as grey images, as the front end reads them."""
+    return tuple(to_grey(image) for image in render_colour(*args, **kwargs))
+
 
 SUBPIXEL = 1e-6  # pixels: round trips through OpenCV's iterative undistortion
 ALBEDO_ATOL = 1e-3  # world consistency up to cv2.remap's fixed-point interpolation weights

@@ -17,7 +17,7 @@ from typing import Annotated
 
 import typer
 
-from auvnav.cli import compass, dive, graph, io, sim, stages  # noqa: F401 (each registers its commands)
+from auvnav.cli import campaign, compass, coverage, dive, graph, io, sim, stages  # noqa: F401 (each registers its commands)
 from auvnav.cli.common import app
 from auvnav.errors import AuvnavError
 

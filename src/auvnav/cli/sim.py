@@ -115,6 +115,12 @@ class _Switch(str, Enum):
     default = "default"
 
 
+class WaterOpt(str, Enum):
+    clear = "clear"
+    coastal = "coastal"
+    turbid = "turbid"
+
+
 @app.command()
 def simulate(
     scenario: Annotated[
@@ -159,6 +165,14 @@ def simulate(
         float, typer.Option("--image-scale", help="Image size relative to 1360 x 1024.")
     ] = 1.0,
     image_rate_hz: Annotated[float, typer.Option("--image-rate-hz", help="Camera trigger rate, Hz.")] = 1.0,
+    water: Annotated[
+        WaterOpt,
+        typer.Option(
+            "--water",
+            help="Water of the images: Jerlov type IB (clear), 3C (coastal) or 5C (turbid) attenuation, "
+            "with scattering, backscatter and the camera's gain to match.",
+        ),
+    ] = WaterOpt.clear,
     truth_loops: Annotated[
         bool,
         typer.Option("--truth-loops", help="Write truth/loops.csv: loop closures from the truth."),
@@ -226,7 +240,7 @@ def simulate(
             summary = run_scenario(scenario, out, progress=progress, **options)
     if images:
         summary["images"] = _render_images(
-            out, image_scale, image_rate_hz, seed, as_json or quiet, workers, scheduler
+            out, image_scale, image_rate_hz, seed, as_json or quiet, workers, scheduler, water.value
         )
     end = summary["end_error_m"]
     human = (
@@ -249,6 +263,7 @@ def _render_images(
     silent: bool,
     workers: int | None,
     scheduler: str | None,
+    water: str = "clear",
 ) -> int:
     """Render a simulated dive's stereo images (with a progress bar unless silent); the pair count."""
     from auvnav.executor import make_executor
@@ -262,6 +277,7 @@ def _render_images(
             scale=scale,
             rate_hz=rate_hz,
             seed=seed,
+            water=water,  # type: ignore[arg-type]
             executor=executor,
             progress=None if progress is None else (lambda done, total: progress("rendering", done, total)),
         )

@@ -1,4 +1,5 @@
-"""``auvnav process`` and the command of each pipeline stage (navigate, loops, slam, depth, report)."""
+"""``auvnav process`` and the command of each pipeline stage (navigate, loops, slam, depth, coverage, recon,
+report)."""
 
 from __future__ import annotations
 
@@ -53,12 +54,23 @@ def _register() -> None:
         "depth",
         "Check pressure depth against loop closures (paper Fig. 6); writes DIVE/products/depth/.",
     )
+    from auvnav.cli.coverage import DEFAULT_COMMAND, coverage_app
+
+    stage_command(
+        coverage_app,
+        BY_NAME["coverage"],
+        DEFAULT_COMMAND,
+        "The coverage stage (auvnav coverage DIVE): image footprints on a map grid, gaps, overlap, "
+        "line spacing ('accordion', 'figure 8'); writes DIVE/products/coverage/.",
+    )
     stage_command(
         app,
-        BY_NAME["report"],
-        "report",
-        "The paper's figures from a dive's products; writes DIVE/products/report/.",
+        BY_NAME["recon"],
+        "recon",
+        "Dense stereo, TSDF mesh, DEM and orthophoto (GeoTIFF), false relief on revisits (paper Fig. 11); "
+        "writes DIVE/products/recon/.",
     )
+    from auvnav.cli import report  # noqa: F401 (auvnav report DIVE|CAMPAIGN: the report stage or a campaign's page)
 
 
 _register()

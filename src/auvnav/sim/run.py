@@ -90,6 +90,9 @@ class SimConfig:
     ----------
     seed : int
         The dive's seed: seafloor, per-dive sensor errors (DVL scale factor), noise.
+    site_seed : int or None
+        The seafloor's seed when it is not the dive's: a repeat survey of a site flies over the
+        seafloor of an earlier dive (its seed) with noise of its own (``seed``).
     vehicle_seed : int
         The vehicle's seed: errors that belong to the vehicle, not the dive (the DVL's mounting
         misalignment), shared by every dive of a campaign flown with the same vehicle.
@@ -123,6 +126,7 @@ class SimConfig:
 
     seed: int = 0
     vehicle_seed: int = 0
+    site_seed: int | None = None
     latitude_rad: float = SCOTT_REEF_LATITUDE_DEG * DEG
     longitude_rad: float = SCOTT_REEF_LONGITUDE_DEG * DEG
     start_time_s: float = field(default_factory=lambda: _posix(DEFAULT_START_TIME))
@@ -315,13 +319,20 @@ def _truth_dict(
                 "misalignment_rpy_deg": np.degrees(misalignment_rpy),
             },
             "dynamics": _file_units(asdict(config.dynamics)),
-            "seafloor": {"seed": config.seed, **asdict(config.seafloor)},
+            "seafloor": {
+                "seed": _site_seed(config),
+                **{k: v for k, v in asdict(config.seafloor).items() if k != "removed_cells" or v},
+            },
             "dt_s": config.dt_s,
             "usbl": config.usbl,
             "mission": mission.summary(),
             "result": summary,
         }
     )
+
+
+def _site_seed(config: SimConfig) -> int:
+    return config.seed if config.site_seed is None else config.site_seed
 
 
 def simulate(
@@ -349,7 +360,7 @@ def simulate(
     rng_dive, rng_loop, rng_pressure, rng_usbl = (np.random.default_rng(s) for s in seeds)
     rng_vehicle = np.random.default_rng(np.random.SeedSequence([config.vehicle_seed, 0x7E41C1E]))
     errors, misalignment_rpy = _per_dive_errors(rng_dive, rng_vehicle, sensors, config.vehicle)
-    seafloor = Seafloor(config.seed, config.seafloor)
+    seafloor = Seafloor(_site_seed(config), config.seafloor)
 
     expected_s = mission.planned_duration_s(
         config.dynamics.vertical_rate_max_mps, config.seafloor.mean_depth_m
@@ -531,6 +542,9 @@ def run_scenario(
     truth_loops: bool = False,
     false_loops: float = 0.0,
     image_rate_hz: float = 1.0,
+    site_seed: int | None = None,
+    days_later: float = 0.0,
+    removed_cells: tuple[tuple[int, int], ...] = (),
 ) -> dict[str, Any]:
     """``auvnav simulate``: a generated mission (``navcheck|survey|transit|spin``) or a mission file,
     simulated and written as a dive folder; returns the summary.
@@ -561,6 +575,11 @@ def run_scenario(
         Fraction of them that are false, in [0, 1) (needs ``truth_loops``).
     image_rate_hz : float
         Camera trigger rate of the truth loops' image times when no images are rendered.
+    site_seed, days_later, removed_cells
+        A repeat survey of a site: the seafloor of the dive with seed ``site_seed`` (the same mission
+        flown ``days_later`` days after the default start, so another tide; its own noise, GPS fixes
+        and DVL errors from ``seed``), with the reef mounds of ``removed_cells`` gone
+        (:class:`auvnav.sim.seafloor.SeafloorParams`, :func:`auvnav.sim.seafloor.tallest_mound`).
 
     Raises
     ------
@@ -594,6 +613,9 @@ def run_scenario(
         compass_correction=correction,
         max_duration_s=max_duration_s,
         usbl=usbl,
+        site_seed=site_seed,
+        start_time_s=_posix(DEFAULT_START_TIME) + 86400.0 * days_later,
+        seafloor=SeafloorParams(removed_cells=tuple((int(i), int(j)) for i, j in removed_cells)),
     )
     sim = simulate(mission, config, progress=progress)
     write_simulation(sim, Path(out), overwrite=overwrite)

@@ -12,6 +12,9 @@ datum, positive down:
   and its eight neighbouring cells;
 - rugosity: a sum of sinusoids of 0.3 to 3 m wavelength (default 3 cm amplitude in all).
 
+A seafloor change between repeat surveys of a site (same seed): ``removed_cells`` lists lattice
+cells whose mound is gone (a coral head removed); :func:`tallest_mound` finds one worth removing.
+
 The scales follow the mesophotic reef of the paper's field site (section IV and Fig. 10: coral
 structures of O(1) m on a lagoon floor 20 to 110 m deep). :meth:`Seafloor.depth_m` and
 :meth:`Seafloor.gradient` are vectorised over any shape of coordinates, for ray casting.
@@ -54,6 +57,7 @@ class SeafloorParams:
     rugosity_m: float = 0.03
     rugosity_wavelengths_m: tuple[float, float] = (0.3, 3.0)
     rugosity_terms: int = 12
+    removed_cells: tuple[tuple[int, int], ...] = ()
 
     def __post_init__(self) -> None:
         if self.reef_length_m[1] / 2 > self.reef_cell_m:
@@ -146,6 +150,8 @@ class Seafloor:
         """The mound of each lattice cell (i, j): drawn from the hash of the cell and the seed."""
         p = self.params
         present, u_n, u_e, u_h, u_len, u_ratio, u_dir, _, _ = _uniforms(i, j, self._salt)
+        for ri, rj in p.removed_cells:
+            present = np.where((i == ri) & (j == rj), 2.0, present)  # never below the probability
         h_lo, h_hi = p.reef_height_m
         a = 0.5 * (p.reef_length_m[0] + u_len * (p.reef_length_m[1] - p.reef_length_m[0]))
         return _Mounds(
@@ -239,3 +245,65 @@ class Seafloor:
         n, e = np.array([north_m]), np.array([east_m])
         d, gn, ge = self._floor(n, e, self._reefs(mounds, n[:, None], e[:, None], True), True)
         return float(d[0]), float(gn[0]), float(ge[0])
+
+
+@dataclass(frozen=True)
+class Mound:
+    """One reef mound: its lattice cell, centre (local NED, metres), height and half-axes (metres)."""
+
+    cell: tuple[int, int]
+    north_m: float
+    east_m: float
+    height_m: float
+    a_m: float
+    b_m: float
+
+    @property
+    def area_m2(self) -> float:
+        """Area of its footprint ellipse, m^2."""
+        return math.pi * self.a_m * self.b_m
+
+
+def tallest_mound(
+    seafloor: Seafloor,
+    north_m: tuple[float, float],
+    east_m: tuple[float, float],
+    *,
+    points_ne_m: FloatArray | None = None,
+    min_density: float = 0.0,
+) -> Mound:
+    """The tallest mound whose centre lies inside the box ``north_m x east_m`` (metres) and, when
+    ``points_ne_m`` (N, 2) are given, with at least ``min_density`` of them per m^2 inside its ellipse's
+    inscribed circle (a mound the images cover)."""
+    cell = seafloor.params.reef_cell_m
+    i, j = np.meshgrid(
+        np.arange(math.floor(north_m[0] / cell) - 1, math.floor(north_m[1] / cell) + 2),
+        np.arange(math.floor(east_m[0] / cell) - 1, math.floor(east_m[1] / cell) + 2),
+        indexing="ij",
+    )
+    m = seafloor._mounds(i.ravel(), j.ravel())
+    inside = (
+        (m.height_m > 0)
+        & (m.north_m >= north_m[0])
+        & (m.north_m <= north_m[1])
+        & (m.east_m >= east_m[0])
+        & (m.east_m <= east_m[1])
+    )
+    if points_ne_m is not None and np.any(inside):
+        from scipy.spatial import cKDTree
+
+        tree = cKDTree(np.asarray(points_ne_m, dtype=float))
+        centres = np.column_stack([m.north_m, m.east_m])
+        counts = np.array([len(tree.query_ball_point(c, r)) for c, r in zip(centres, m.b_m, strict=True)])
+        inside &= counts >= min_density * np.pi * m.b_m**2
+    if not np.any(inside):
+        raise ValueError(f"no reef mound lies inside north {north_m} x east {east_m} m")
+    k = int(np.argmax(np.where(inside, m.height_m, -1.0)))
+    return Mound(
+        (int(i.ravel()[k]), int(j.ravel()[k])),
+        float(m.north_m[k]),
+        float(m.east_m[k]),
+        float(m.height_m[k]),
+        float(m.a_m[k]),
+        float(m.b_m[k]),
+    )

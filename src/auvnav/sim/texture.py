@@ -8,7 +8,22 @@ The scene mixes the habitats of a shallow tropical reef slope such as Scott Reef
 
 - sand with wave ripples (wavelength ~9 cm, crests bending with a low-frequency field) and grain texture;
 - rubble: pebbles and shell fragments, bright and dark blobs of 1-4 cm, in patches;
-- coral-like patches of 1-3 m with irregular edges, high-contrast ridged structure at 2-8 cm and polyps.
+- coral-like patches of 1-3 m with irregular edges, high-contrast ridged structure at 2-8 cm and polyps;
+- featureless sand (``bare_fraction``): patches of 0.5-2 m where the sand shows no detail at survey
+  altitude, and fields of regular ripples (``ripple_field_fraction``): straight crests of one
+  wavelength over metres, alike from patch to patch, the repetitive texture that invites false loops.
+
+What is matched to real seafloor photographs (issue 20): the contrast, and the spectrum's slope. A
+colour-corrected AUV photograph of a sandy reef seafloor has a grey-level standard deviation of about 8
+(8-bit); the default ``contrast`` 0.6 gives rendered images whose robust standard deviation after
+illumination correction (:func:`auvnav.vision.features.robust_contrast`) is 16 in clear water, 13 in
+coastal and 7 in turbid water (medians over 12 half-scale views of the check dive; 9-24, 7-19 and 3-11).
+Natural images have power spectra falling about as ``1/f^2`` (Field 1987, "Relations between the
+statistics of natural images and the response properties of cortical cells", JOSA A 4(12); van der
+Schaaf and van Hateren 1996, Vision Research 36(17): exponent -1.88 +/- 0.43); the grain and rubble are
+fBm with equal amplitude per octave, which is that spectrum. Measured on the same rendered views
+(radial power spectrum, 4-60 cycles per image): exponent -2.5 median (-1.3 to -3.8), steeper than the
+photographs' because the featureless sand and the smooth ripple fields have little fine detail.
 
 Each ingredient is value noise: seeded random values on a square lattice of spacing ``L`` metres,
 hashed from the integer lattice coordinates (so any window of the world evaluates identically), and
@@ -115,9 +130,26 @@ class _Window:
         return values.ravel()[: self.n]
 
 
+#: Colour of each habitat: reflectance in the camera's red, green and blue bands relative to the grey
+#: (luminance, ITU-R BT.601 weights) albedo. Sand: the coral sand of Maritorena, Morel and Gentili (1994),
+#: "Diffuse reflectance of oceanic shallow waters: influence of water depth and bottom albedo", Limnol.
+#: Oceanogr. 39(7), Fig. 6 (0.37 at 475 nm, 0.42 at 525 nm, rising slowly into the red: 0.47 taken for
+#: 600-650 nm). Coral and algae: dark in the blue and green where their pigments absorb, brighter in the
+#: red (their brown algae: 0.028 at 475 nm, 0.041 at 525 nm; 0.09 taken for the red).
+SAND_RGB = (0.47, 0.42, 0.37)
+CORAL_RGB = (0.09, 0.05, 0.03)
+LUMA_RGB = (0.299, 0.587, 0.114)
+
+
+def _tint(rgb: tuple[float, float, float]) -> NDArray[np.float32]:
+    """A colour as multipliers of its luminance."""
+    luma = sum(w * c for w, c in zip(LUMA_RGB, rgb, strict=True))
+    return np.array(rgb, dtype=np.float32) / np.float32(luma)
+
+
 @dataclass(frozen=True)
 class SeafloorTexture:
-    """Seeded benthic albedo field.
+    """Seeded benthic albedo field, grey (:meth:`albedo`) or in the camera's three bands (:meth:`albedo_rgb`).
 
     Parameters
     ----------
@@ -127,20 +159,37 @@ class SeafloorTexture:
         Approximate fraction of the area covered by coral-like patches, 0..1.
     ripple_wavelength_m : float
         Sand ripple wavelength, metres (wave ripples on reef sand: 5-15 cm).
+    bare_fraction : float
+        Approximate fraction of the sand that is featureless: fine sand with neither grain texture
+        visible at survey altitude, nor rubble, nor ripples (patches of 0.5-2 m).
+    ripple_field_fraction : float
+        Approximate fraction of the sand covered by fields of regular ripples: straight crests of one
+        wavelength and direction over metres, the same from one patch to the next (repetitive texture
+        that invites false loop closures).
+    contrast : float
+        Scales every variation of the albedo about its habitat's mean (1: the structure as designed;
+        the default matches the contrast of real seafloor photographs, see the module docstring).
     """
 
     seed: int = 0
     coral_fraction: float = 0.35
     ripple_wavelength_m: float = 0.09
+    bare_fraction: float = 0.2
+    ripple_field_fraction: float = 0.25
+    contrast: float = 0.6
 
     def __post_init__(self) -> None:
-        if not 0.0 <= self.coral_fraction <= 1.0:
-            raise ValueError(f"coral_fraction must be in [0, 1]; found {self.coral_fraction}")
+        for name in ("coral_fraction", "bare_fraction", "ripple_field_fraction"):
+            value = getattr(self, name)
+            if not 0.0 <= value <= 1.0:
+                raise ValueError(f"{name} must be in [0, 1]; found {value}")
         if self.ripple_wavelength_m <= 0:
             raise ValueError(f"ripple_wavelength_m must be positive; found {self.ripple_wavelength_m}")
+        if not 0.0 < self.contrast <= 2.0:
+            raise ValueError(f"contrast must be in (0, 2]; found {self.contrast}")
 
     def albedo(self, north_m: FloatArray, east_m: FloatArray, *, footprint_m: float = 0.0) -> FloatArray:
-        """Diffuse reflectance at world points.
+        """Diffuse reflectance at world points, grey: the luminance of :meth:`albedo_rgb`.
 
         Parameters
         ----------
@@ -154,14 +203,29 @@ class SeafloorTexture:
         -------
         ndarray, same shape, float32 reflectance in [0.02, 0.95].
         """
+        return self._evaluate(north_m, east_m, footprint_m, rgb=False)
+
+    def albedo_rgb(
+        self, north_m: FloatArray, east_m: FloatArray, *, footprint_m: float = 0.0
+    ) -> NDArray[np.float32]:
+        """Diffuse reflectance in the camera's red, green and blue bands at world points.
+
+        Returns
+        -------
+        ndarray, shape (..., 3), float32 reflectance in [0.01, 0.95], channels (red, green, blue).
+        """
+        return self._evaluate(north_m, east_m, footprint_m, rgb=True)
+
+    def _evaluate(self, north_m: FloatArray, east_m: FloatArray, footprint_m: float, rgb: bool) -> NDArray:
         north_m = np.asarray(north_m, dtype=float)
         east_m = np.asarray(east_m, dtype=float)
         if north_m.shape != east_m.shape:
             raise ValueError(f"north_m and east_m must match; found {north_m.shape} and {east_m.shape}")
+        bands = (3,) if rgb else ()
         flat_n, flat_e = north_m.ravel(), east_m.ravel()
-        out = np.empty(flat_n.size, dtype=np.float32)
+        out = np.empty((flat_n.size, *bands), dtype=np.float32)
         if flat_n.size == 0:
-            return out.reshape(north_m.shape)
+            return out.reshape(*north_m.shape, *bands)
         if (
             north_m.ndim == 2
             and north_m.shape[1] < 32767
@@ -169,17 +233,17 @@ class SeafloorTexture:
             and np.ptp(flat_e) < _TILE_M
         ):
             # an image's worth of points: one window, in the points' own layout
-            return self._albedo_window(_Window(north_m, east_m), footprint_m)
+            return self._albedo_window(_Window(north_m, east_m), footprint_m, rgb)
         tile = np.floor(flat_n / _TILE_M).astype(np.int64) * 1_000_003 + np.floor(flat_e / _TILE_M).astype(
             np.int64
         )
         order = np.argsort(tile, kind="stable")
         bounds = np.flatnonzero(np.diff(tile[order])) + 1
         for idx in np.split(order, bounds):
-            out[idx] = self._albedo_window(_Window(flat_n[idx], flat_e[idx]), footprint_m)
-        return out.reshape(north_m.shape)
+            out[idx] = self._albedo_window(_Window(flat_n[idx], flat_e[idx]), footprint_m, rgb)
+        return out.reshape(*north_m.shape, *bands)
 
-    def _albedo_window(self, w: _Window, footprint_m: float) -> NDArray[np.float32]:
+    def _albedo_window(self, w: _Window, footprint_m: float, rgb: bool) -> NDArray[np.float32]:
         salt = self.seed * 0x2545F4914F6CDD1D
 
         def octave(spacing_m: float, k: int) -> NDArray[np.float32]:
@@ -190,31 +254,68 @@ class SeafloorTexture:
                 return np.zeros_like(w.north, dtype=np.float32)
             return fade * w.noise(spacing_m, salt + 7919 * k)
 
+        def level(fraction: float) -> float:
+            """The value-noise level exceeded over about ``fraction`` of the area."""
+            return 0.6 - 1.2 * fraction
+
         # Habitat: coral patches where a low-frequency field exceeds a level set by the cover fraction.
         habitat = 0.65 * octave(3.0, 1) + 0.35 * octave(1.2, 2) + 0.18 * octave(0.35, 3)
-        level = 0.6 - 1.2 * self.coral_fraction
-        coral = _smoothstep(level, level + 0.08, habitat)
+        lc = level(self.coral_fraction)
+        coral = _smoothstep(lc, lc + 0.08, habitat)
 
-        # Sand: grain texture (fBm) plus wave ripples whose crests bend and fade.
-        sand = 0.50 + 0.06 * octave(0.25, 4) + 0.05 * octave(0.08, 5) + 0.06 * octave(0.02, 6)
-        sand += 0.07 * octave(0.008, 7) + 0.06 * octave(0.004, 8)
+        # Featureless sand: patches where the sand's detail fades out.
+        lb = level(self.bare_fraction)
+        bare = _smoothstep(lb, lb + 0.12, 0.8 * octave(1.5, 20) + 0.2 * octave(0.5, 21))
+        detail = 1.0 - 0.9 * bare
+
+        # Sand: grain texture (fBm: equal amplitude per octave, a power spectrum falling as 1/f^2) plus
+        # wave ripples whose crests bend and fade.
+        grain = 0.06 * octave(0.25, 4) + 0.05 * octave(0.08, 5) + 0.06 * octave(0.02, 6)
+        grain += 0.07 * octave(0.008, 7) + 0.06 * octave(0.004, 8)
         theta = 0.8 * np.pi * octave(6.0, 9) + self.seed
         phase = (np.cos(theta) * w.north + np.sin(theta) * w.east) * (2 * np.pi / self.ripple_wavelength_m)
         ripples = np.sin(phase + 4.0 * octave(0.6, 10)).astype(np.float32)
         ripple_amp = 0.10 * _smoothstep(-0.3, 0.3, octave(2.0, 11))
-        sand += ripple_amp * ripples
+        sand = grain + ripple_amp * ripples
 
         # Rubble: bright and dark fragments in patches, at two sizes.
         rubble = _smoothstep(-0.1, 0.4, octave(1.5, 12))
         bright = _smoothstep(0.35, 0.6, octave(0.025, 13)) + 0.7 * _smoothstep(0.45, 0.7, octave(0.012, 14))
         dark = _smoothstep(0.4, 0.65, octave(0.03, 15))
         sand += rubble * (0.30 * bright - 0.30 * dark)
+        sand *= detail
+
+        # Ripple fields: straight crests, one wavelength, a direction that turns only over tens of metres.
+        lr = level(self.ripple_field_fraction)
+        field = _smoothstep(lr, lr + 0.1, octave(5.0, 22)) * (1.0 - coral)
+        heading = 0.3 * np.pi * octave(40.0, 23) + 0.5 * self.seed
+        crest = (np.cos(heading) * w.north + np.sin(heading) * w.east) * (
+            2 * np.pi / self.ripple_wavelength_m
+        )
+        crest = crest + 0.4 * octave(1.0, 24)
+        regular = (np.sin(crest) + 0.25 * np.sin(2 * crest + 0.8)).astype(np.float32)
+        sand = (1.0 - field) * sand + field * (0.12 * regular + 0.02 * octave(0.02, 25))
+        sand = 0.50 + self.contrast * sand
 
         # Coral: ridged structure (1 - |noise|) at two scales, with small polyps.
         ridge1 = 1.0 - np.abs(octave(0.07, 16))
         ridge2 = 1.0 - np.abs(octave(0.028, 17))
         polyps = _smoothstep(0.3, 0.7, octave(0.007, 18))
         reef = 0.18 + 0.40 * ridge1**3 + 0.20 * ridge2**2 + 0.12 * polyps + 0.05 * octave(0.4, 19)
+        reef = REEF_MEAN + self.contrast * (reef - REEF_MEAN)
 
         albedo = (1.0 - coral) * sand + coral * reef
-        return np.clip(w.flat(albedo), 0.02, 0.95)
+        if not rgb:
+            return np.clip(w.flat(albedo), 0.02, 0.95)
+        # Colour: each habitat's, varying a little from place to place.
+        tint = (1.0 - coral)[..., None] * _tint(SAND_RGB) + coral[..., None] * _tint(CORAL_RGB)
+        hue = 0.06 * octave(0.8, 26)
+        tint = tint * (1.0 + np.stack([hue, np.zeros_like(hue), -hue], axis=-1))
+        tint /= (tint @ np.array(LUMA_RGB, dtype=np.float32))[..., None]  # keep the luminance
+        out = np.clip(albedo[..., None] * tint, 0.01, 0.95)
+        if len(w.shape) == 2:
+            return out
+        return out.reshape(-1, 3)[: w.n]
+
+
+REEF_MEAN = 0.33  # mean albedo of the coral structure above

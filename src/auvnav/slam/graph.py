@@ -40,7 +40,9 @@ solves the graph. The factors:
 - **Loop closures** (``BetweenFactorPose3``) with the file's covariance converted to GTSAM's tangent
   (:func:`loop_covariance_tangent`), wrapped in a robust kernel (Cauchy by default) with the back
   end's threshold (:func:`auvnav.slam.solve.robust_threshold`); a loop closure whose whitened
-  residual exceeds it at the solution is reported as rejected.
+  residual exceeds it at the solution is reported as rejected. Before the solve, by default, the loop
+  closures are selected by pairwise consistency against the odometry (:mod:`auvnav.slam.pcm`):
+  those it rejects stay out of the graph (:attr:`SlamOptions.loop_selection`).
 """
 
 from __future__ import annotations
@@ -70,6 +72,7 @@ from auvnav.vision.loopfile import LoopClosures, check_loop_times
 log = logging.getLogger(__name__)
 
 Robust = Literal["none", "huber", "cauchy"]
+Selection = Literal["none", "pcm"]
 
 #: The raw compass's heading sigma is the vehicle's times this in the graph (paper: "an artificially
 #: large heading measurement noise" for the navigation check dive).
@@ -107,10 +110,18 @@ class SlamOptions:
         Kernel on loop closures.
     robust_k : float or None
         Its threshold on the whitened residual norm (None: the back end's chi-square default).
+    loop_selection : {"pcm", "none"}
+        Loop closures selected by pairwise consistency against the odometry
+        (:mod:`auvnav.slam.pcm`) before the solve, or all of them left to the kernel.
     incremental : bool
         iSAM2 instead of batch Levenberg-Marquardt.
     poses_per_update : int
-        With ``incremental``: poses added per iSAM2 update (1: pose by pose).
+        With ``incremental`` or ``online``: poses added per iSAM2 update (1: pose by pose).
+    online : bool
+        Replay the dive in time order as the vehicle would (:mod:`auvnav.slam.online`): loop closures
+        added when found and decided, the estimate known at each moment recorded.
+    loop_latency_s : float
+        With ``online``: time from a loop closure's later image to the front end's finding it, seconds.
     max_iterations : int
         Levenberg-Marquardt iteration limit (per stage).
     aux_period_s : float
@@ -126,8 +137,11 @@ class SlamOptions:
     harmonics: int = 3
     robust: Robust = "cauchy"
     robust_k: float | None = None
+    loop_selection: Selection = "pcm"
     incremental: bool = False
     poses_per_update: int = DEFAULT_POSES_PER_UPDATE
+    online: bool = False
+    loop_latency_s: float = 1.0
     max_iterations: int = 100
     aux_period_s: float = 1.0
     attitude_window_s: float = 1.0
@@ -138,6 +152,8 @@ class SlamOptions:
             raise ValueError(f"compass_sigma_rad must be positive; found {self.compass_sigma_rad}")
         if self.robust not in ("none", "huber", "cauchy"):
             raise ValueError(f"robust must be none, huber or cauchy; found {self.robust!r}")
+        if self.loop_selection not in ("none", "pcm"):
+            raise ValueError(f"loop_selection must be none or pcm; found {self.loop_selection!r}")
         if (
             self.harmonics < 0
             or self.max_iterations < 1
@@ -148,6 +164,8 @@ class SlamOptions:
                 "harmonics and marginal_every must be non-negative, max_iterations and poses_per_update "
                 "positive"
             )
+        if not self.loop_latency_s >= 0:
+            raise ValueError(f"loop_latency_s must be non-negative; found {self.loop_latency_s}")
         if not (self.aux_period_s > 0 and self.attitude_window_s >= 0):
             raise ValueError("aux_period_s must be positive and attitude_window_s non-negative")
 

@@ -17,7 +17,7 @@ from auvnav.dive import Dive
 from auvnav.errors import ConfigError
 from auvnav.nav.inputs import nav_inputs
 from auvnav.slam.compass import CompassModel
-from auvnav.slam.graph import SlamOptions, build_graph
+from auvnav.slam.graph import SensorGraph, SlamOptions, build_graph
 from auvnav.slam.optimize import PoseMarginals, SlamSolution, marginals, solution_trajectory, solve
 from auvnav.slam.poses import build_pose_times
 from auvnav.trajectory import Trajectory
@@ -98,6 +98,7 @@ class SlamResult:
                 "rejected": len(sol.rejected),
                 "rejected_rows": [int(r) + 1 for r in sol.rejected],
                 "robust_k": sg.loop_k,
+                "selection": None if sol.selection is None else sol.selection.summary(),
             },
             "factors": sg.factor_counts(),
             "compass": compass,
@@ -110,7 +111,37 @@ class SlamResult:
             "cost_after": sol.cost_after,
             "chi2_after": sol.chi2_after,
             "marginals": None if self.sigmas is None else {"computed": self.sigmas.computed},
+            "online": None if sol.online is None else sol.online.summary(),
         }
+
+
+def sensor_graph(
+    dive: Dive,
+    image_t_s: np.ndarray,
+    *,
+    image_source: str = "",
+    loops: LoopClosures | None = None,
+    correction: DeviationModel | None = None,
+    tide: TideModel | None = None,
+    options: SlamOptions,
+    loops_name: str = "loops",
+) -> SensorGraph:
+    """A dive's sensor graph, unsolved (:func:`slam`'s parameters)."""
+    if correction is not None and options.estimate_compass:
+        raise ConfigError("give --compass-correction or --estimate-compass, not both")
+    if loops is not None:
+        check_loops(loops, len(image_t_s), loops_name)
+    inputs = nav_inputs(dive, None if options.estimate_compass else correction)
+    times = build_pose_times(image_t_s, inputs, aux_period_s=options.aux_period_s, source=image_source)
+    compass = CompassModel(
+        R_body_compass=dive.vehicle.compass.R_body_sensor,
+        declination_rad=inputs.declination_rad,
+        correction=correction,
+        estimate=options.estimate_compass,
+        harmonics=options.harmonics,
+        a0_prior_sigma_rad=dive.vehicle.heading_sigma_rad,
+    )
+    return build_graph(dive, inputs, times, loops, compass, options=options, tide=tide, loops_name=loops_name)
 
 
 def slam(
@@ -153,30 +184,11 @@ def slam(
     """
     options = options or SlamOptions()
     names = names or {}
-    if correction is not None and options.estimate_compass:
-        raise ConfigError("give --compass-correction or --estimate-compass, not both")
-    if loops is not None:
-        check_loops(loops, len(image_t_s), names.get("loops_file") or "loops")
-    inputs = nav_inputs(dive, None if options.estimate_compass else correction)
-    times = build_pose_times(image_t_s, inputs, aux_period_s=options.aux_period_s, source=image_source)
-    compass = CompassModel(
-        R_body_compass=dive.vehicle.compass.R_body_sensor,
-        declination_rad=inputs.declination_rad,
-        correction=correction,
-        estimate=options.estimate_compass,
-        harmonics=options.harmonics,
-        a0_prior_sigma_rad=dive.vehicle.heading_sigma_rad,
-    )
-    graph = build_graph(
-        dive,
-        inputs,
-        times,
-        loops,
-        compass,
-        options=options,
-        tide=tide,
-        loops_name=names.get("loops_file") or "loops",
-    )
+    graph = sensor_graph(
+        dive, image_t_s, image_source=image_source, loops=loops, correction=correction, tide=tide,
+        options=options, loops_name=names.get("loops_file") or "loops",
+    )  # fmt: skip
+    compass = graph.compass
     solution = solve(graph, options)
     sigmas = marginals(solution, options.marginal_every) if options.marginal_every > 0 else None
     deviation = None

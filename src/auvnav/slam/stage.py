@@ -10,6 +10,9 @@ Products (DESIGN section 6), in ``DIVE/products/slam/``:
   odometry and the loop closures used as ``EDGE_SE3:QUAT`` records (:func:`auvnav.slam.g2o.write_g2o`;
   the unary factors, compass, attitude, depth and fixes, have no g2o record);
 - ``summary.json``: :meth:`~auvnav.slam.result.SlamResult.summary`;
+- ``online.csv`` with ``--online``: each image pose as the vehicle knew it when the iSAM2 update
+  that added it finished (:mod:`auvnav.slam.online`), columns as ``trajectory.csv`` without sigmas;
+  ``trajectory.csv`` is then the smoother's estimate after the last update;
 - ``correction.yaml`` with ``estimate_compass``: the estimated deviation as a correction file
   (``auvnav-compass-correction/1``, :func:`auvnav.compass.correction.write_correction`) with the
   coefficients' marginal covariance. Earlier releases called it ``compass_correction.yaml``.
@@ -17,8 +20,9 @@ Products (DESIGN section 6), in ``DIVE/products/slam/``:
 
 from __future__ import annotations
 
+import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -27,7 +31,7 @@ from auvnav.dive import ImageIndex, dive_files, find_stream_file, read_dive
 from auvnav.errors import InsufficientDataError
 from auvnav.stagekit import Stage, StageContext, setting
 from auvnav.streams import write_json
-from auvnav.trajectory import write_trajectory, write_tum
+from auvnav.trajectory import Trajectory, write_trajectory, write_tum
 from auvnav.vision.loopfile import loops_file, read_loops
 
 if TYPE_CHECKING:  # the models (GTSAM) load when the stage runs, not when the pipeline checks its key
@@ -48,7 +52,18 @@ class SlamSettings:
     )
     incremental: bool = setting(False, "iSAM2 (a vehicle's solver), not batch Levenberg-Marquardt.")
     poses_per_update: int | None = setting(
-        None, "With --incremental: poses per iSAM2 update [10: one update every 10 s at 1 Hz].", minimum=1
+        None,
+        "With --incremental or --online: poses per iSAM2 update [10: one update every 10 s at 1 Hz].",
+        minimum=1,
+    )
+    online: bool = setting(
+        False, "Replay the dive in time order as the vehicle would (iSAM2); writes products/slam/online.csv."
+    )
+    loop_latency_s: float | None = setting(
+        None,
+        "With --online: delay from a loop closure's later image to its finding, s [1 / the vision "
+        "stage's measured stereo pairs per second when its summary exists, else 1: the camera's period].",
+        minimum=0.0,
     )
     tide: Path | None = setting(None, "Tide constituent file: the depth becomes depth below the datum.")
     compass_sigma_deg: float | None = setting(
@@ -57,6 +72,9 @@ class SlamSettings:
     harmonics: int = setting(3, "Harmonics of the estimated deviation.", minimum=0)
     robust: Literal["none", "huber", "cauchy"] = setting(
         "cauchy", "Kernel on loop closures; lists those it rejects."
+    )
+    loop_selection: Literal["pcm", "none"] = setting(
+        "pcm", "Loop closures selected by pairwise consistency against the odometry first (pcm), or not."
     )
     marginal_every: int = setting(1, "Marginals of every Nth stereo pair (0: none).", minimum=0)
 
@@ -70,10 +88,26 @@ class SlamSettings:
             estimate_compass=self.estimate_compass,
             harmonics=self.harmonics,
             robust=self.robust,
+            loop_selection=self.loop_selection,
             incremental=self.incremental,
+            online=self.online,
             **({} if self.poses_per_update is None else {"poses_per_update": self.poses_per_update}),
             marginal_every=self.marginal_every,
         )
+
+
+def online_trajectory(result: SlamResult) -> Trajectory:
+    """The image poses as known online (:class:`auvnav.slam.online.OnlineRecord`), no sigmas."""
+    from auvnav.frames import rot2euler
+
+    sol = result.solution
+    assert sol.online is not None
+    image = sol.graph.times.is_image
+    T = sol.online.T_known[image]
+    yaw, pitch, roll = rot2euler(T[:, :3, :3])
+    return Trajectory(
+        t_s=sol.graph.times.t_s[image], p_ned_m=T[:, :3, 3], roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw
+    )
 
 
 def write_products(result: SlamResult, out: Path) -> None:
@@ -88,7 +122,21 @@ def write_products(result: SlamResult, out: Path) -> None:
     if result.deviation is not None:
         record = FitRecord(reference="slam", dives=(result.name,), pairs=len(sol.graph.times))
         write_correction(result.deviation, P.SLAM_CORRECTION.inside(out), overwrite=True, record=record)
+    if sol.online is not None:
+        write_trajectory(online_trajectory(result), P.SLAM_ONLINE.inside(out))
     write_json(result.summary(), P.SLAM_SUMMARY.inside(out))
+
+
+def loop_latency_s(dive: Path, settings: SlamSettings) -> float:
+    """The online replay's loop latency: as given, else the vision stage's time per stereo pair, else 1 s."""
+    if settings.loop_latency_s is not None:
+        return settings.loop_latency_s
+    summary = P.VISION_SUMMARY.path(dive)
+    if summary.is_file():
+        rate = json.loads(summary.read_text(encoding="utf-8")).get("pairs_per_s")
+        if isinstance(rate, (int, float)) and rate > 0:
+            return 1.0 / float(rate)
+    return 1.0
 
 
 def _unavailable(dive: Path, settings: SlamSettings) -> str | None:
@@ -109,6 +157,8 @@ def _inputs(dive: Path, settings: SlamSettings) -> dict[str, Path]:
     loops = loops_file(dive, settings.loops)
     if loops is not None:
         files["loops"] = loops
+    if settings.online and settings.loop_latency_s is None and P.VISION_SUMMARY.path(dive).is_file():
+        files[P.VISION_SUMMARY.rel] = P.VISION_SUMMARY.path(dive)
     for name in ("compass_correction", "tide"):
         if getattr(settings, name) is not None:
             files[name] = getattr(settings, name)
@@ -135,7 +185,7 @@ def _run(ctx: StageContext, settings: SlamSettings, out: Path) -> dict[str, Any]
         loops=read_loops(loops_path),  # its rows are checked against the image times by slam()
         correction=None if correction is None else read_correction(correction),
         tide=None if tide is None else read_constituents(tide, latitude_rad=dive.info.origin.latitude_rad),
-        options=settings.options(),
+        options=replace(settings.options(), loop_latency_s=loop_latency_s(ctx.dive, settings)),
         names={
             "loops_file": str(loops_path),
             "compass_correction": None if correction is None else str(correction),
@@ -155,7 +205,9 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"times from {summary['image_times']}), {summary['duration_s'] / 3600:.2f} h",
         f"factors: {factors}",
         f"loop closures: {loops['used']} used of {loops['given']} in {loops['file']}, "
-        f"{loops['rejected']} rejected by the {summary['robust']} kernel (k = {loops['robust_k']:.2f})",
+        f"{loops['rejected']} rejected by "
+        + (f"pairwise consistency ({loops['selection']['rejected']}) and " if loops.get("selection") else "")
+        + f"the {summary['robust']} kernel (k = {loops['robust_k']:.2f})",
         f"compass: {compass['mode']}, heading sigma {compass['heading_sigma_deg']:.2f} deg"
         + (f", correction {compass['correction']}" if compass["correction"] else ""),
         f"solver {summary['solver']}: cost {summary['cost_before']:.6g} -> {summary['cost_after']:.6g} "
@@ -167,6 +219,14 @@ def format_summary(summary: dict[str, Any]) -> str:
         lines.append(
             f"estimated deviation: a0 {compass['a0_deg']:.3f} deg ({compass['constant_source']}), "
             f"a [{a}], b [{b}] deg"
+        )
+    online = summary.get("online")
+    if online:
+        lines.append(
+            f"online: {online['updates']} iSAM2 updates of {online['poses_per_update']} poses, "
+            f"{online['loops_added']} loop closures added (latency {online['loop_latency_s']:.2f} s, "
+            f"median delay {online['loop_delay_median_s']:.1f} s); per pose median "
+            f"{online['update_median_ms']:.1f} ms, 95th percentile {online['update_p95_ms']:.1f} ms"
         )
     if summary["tide"]:
         lines.append(f"depth below the datum with the tide of {summary['tide']}")

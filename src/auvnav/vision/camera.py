@@ -125,6 +125,8 @@ def triangulate(
     rect: Rectification | StereoGeometry,
     sigma_common_px: float,
     sigma_independent_px: float,
+    *,
+    sigma_disparity_px: FloatArray | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """3-D points and their covariances from rectified stereo matches.
 
@@ -139,6 +141,9 @@ def triangulate(
     rect : Rectification or StereoGeometry
     sigma_common_px, sigma_independent_px : float
         1-sigma of the two parts of a keypoint's position error, rectified pixels, each axis.
+    sigma_disparity_px : ndarray, shape (N,), optional
+        A further error of each match's right column, rectified pixels, 1-sigma (a match whose patch
+        may straddle a depth edge: :func:`auvnav.vision.stereo.disparity_spread`).
 
     Returns
     -------
@@ -169,6 +174,13 @@ def triangulate(
     c2, i2 = sigma_common_px**2, sigma_independent_px**2
     C = np.array([[c2 + i2, c2, 0, 0], [c2, c2 + i2, 0, 0], [0, 0, c2 + i2, c2], [0, 0, c2, c2 + i2]])
     cov_rect = (J @ C) @ np.swapaxes(J, 1, 2)  # matrix products: einsum's three-operand path is 5x slower
+    if sigma_disparity_px is not None:
+        ju = J[:, :, 1]
+        cov_rect += (
+            ju[:, :, None]
+            * ju[:, None, :]
+            * (np.asarray(sigma_disparity_px, dtype=float) ** 2)[:, None, None]
+        )
     p_rect = np.stack([X, Y, Z], axis=1)
     R1 = np.asarray(rect.R1, dtype=float)
     return p_rect @ R1, R1.T @ cov_rect @ R1

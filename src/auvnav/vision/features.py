@@ -14,7 +14,7 @@ pixel coordinates of the image file.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import cv2
 import numpy as np
@@ -40,12 +40,15 @@ class FeatureSettings:
         SIFT runs on images resized by this factor (0 < scale <= 1); None: to
         ``DEFAULT_FEATURE_WIDTH_PX`` wide (never enlarged).
     max_features : int
-        Keypoints kept per image, strongest first. 1,500 at a contrast threshold of 0.04 (OpenCV's
-        default), with ``lk_window_px`` 15, runs the navigation check dive's front end 1.45 times
-        faster than 2,500 at 0.02 with a 21 px window, for a median loop rotation error 0.01 deg
-        larger (0.069 against 0.059 deg; ``benchmarks/bench_vision.py``).
+        Keypoints kept per image, strongest first (``auvnav loops --features``). 1,500 with
+        ``lk_window_px`` 15 ran the navigation check dive's front end 1.45 times faster than 2,500 with
+        a 21 px window, for a median loop rotation error 0.01 deg larger (0.069 against 0.059 deg;
+        ``benchmarks/bench_vision.py``, the procedural reef before issue 20).
     contrast_threshold : float
-        SIFT's contrast threshold (OpenCV ``contrastThreshold``), on illumination-corrected images.
+        SIFT's contrast threshold (OpenCV ``contrastThreshold``), on illumination-corrected images
+        stretched to ``contrast_target_dn``. 0.02 (half OpenCV's default): on the simulator's turbid
+        water the stretched images then give 1,000-1,500 keypoints, most of which the stereo tracking
+        keeps (so they are texture, not noise).
     sigma_px : float
         1-sigma keypoint position noise, pixels of the image SIFT runs on (0.4 px, a usual figure for SIFT).
     stereo_gate_px : float
@@ -59,11 +62,43 @@ class FeatureSettings:
         when tracked to the right image and back.
     min_range_m, max_range_m : float
         Plausible distances of the seafloor from the camera; bound the disparity search.
+    contrast_target_dn : float
+        Adaptive contrast: before SIFT, the illumination-corrected image is stretched about its mean
+        until the robust standard deviation of its grey levels (:func:`robust_contrast`) reaches this
+        many digital numbers, never reduced and by at most ``max_stretch``; ``contrast_threshold`` is
+        thus relative to the image's own contrast wherever that is below the target. 0: no stretch
+        (SIFT's threshold is absolute, as in OpenCV).
+    max_stretch : float
+        The largest contrast stretch (it multiplies the noise as much as the texture).
+    retry_fraction : float
+        Adaptive threshold: when SIFT finds fewer than this fraction of ``max_features`` (an image of
+        featureless sand or smooth ripples), it runs once more at half ``contrast_threshold``. On the
+        check dive in turbid water, 14% of the images had fewer than 1,000 keypoints (370-807) at 0.02;
+        all but one reached 1,500 at 0.01. 0: no second pass.
+    edge_reject_px : float
+        Edge-safe stereo: a match is dropped when its disparity moves by more than this, pixels of the
+        image SIFT runs on, as the tracked window is shifted by half its side
+        (:func:`auvnav.vision.stereo.disparity_spread`: the patch straddles a depth discontinuity); the
+        spread of the matches kept is added to their disparity noise. 0: no test. The limit rises in
+        noisy images to 5 times the pair's lower quartile of spreads
+        (:data:`auvnav.vision.stereo.EDGE_NOISE_FACTOR`). On six rendered scenes with steps
+        (``benchmarks/bench_stereo_edges.py``), of the matches whose patch spans more than 1 px of
+        disparity, 75% are within 1 px of the truth without the test and 96.5% with it (93% at 1 px),
+        for 11% of the other matches.
+    spread_cells : int
+        Well-spread keypoints: SIFT keeps up to ``SPREAD_OVERSAMPLE`` times ``max_features`` and
+        ``max_features`` of them are chosen round-robin over a ``spread_cells`` x ``spread_cells`` grid
+        of the image, strongest first in each cell (:func:`spread`). 0: the strongest, wherever they are.
     """
 
     scale: float | None = None
     max_features: int = 1500
-    contrast_threshold: float = 0.04
+    contrast_threshold: float = 0.02
+    contrast_target_dn: float = 32.0
+    max_stretch: float = 8.0
+    retry_fraction: float = 0.67
+    edge_reject_px: float = 0.5
+    spread_cells: int = 0
     sigma_px: float = 0.4
     stereo_gate_px: float = 2.0
     lk_window_px: int = 15
@@ -76,6 +111,19 @@ class FeatureSettings:
             raise ValueError(f"scale must be in (0, 1]; found {self.scale}")
         if min(self.sigma_px, self.stereo_gate_px, self.lk_window_px, self.max_round_trip_px) <= 0:
             raise ValueError("sigma_px, stereo_gate_px, lk_window_px and max_round_trip_px must be positive")
+        if self.max_features < 1 or self.contrast_threshold <= 0:
+            raise ValueError("max_features and contrast_threshold must be positive")
+        if not 0 <= self.retry_fraction <= 1:
+            raise ValueError(f"retry_fraction must be in [0, 1]; found {self.retry_fraction}")
+        if (
+            self.contrast_target_dn < 0
+            or self.max_stretch < 1
+            or self.spread_cells < 0
+            or self.edge_reject_px < 0
+        ):
+            raise ValueError(
+                "need contrast_target_dn, edge_reject_px, spread_cells >= 0 and max_stretch >= 1"
+            )
         if not 0 < self.min_range_m < self.max_range_m:
             raise ValueError(
                 f"need 0 < min_range_m < max_range_m; found {self.min_range_m}, {self.max_range_m}"
@@ -131,20 +179,70 @@ _SIFT: dict[tuple, cv2.SIFT] = {}
 
 
 def _sift(settings: FeatureSettings) -> cv2.SIFT:
-    key = (settings.max_features, settings.contrast_threshold)
+    n = settings.max_features
+    if settings.spread_cells > 0:
+        n = round(SPREAD_OVERSAMPLE * n)
+    key = (n, settings.contrast_threshold)
     if key not in _SIFT:
         # nOctaveLayers 3, edgeThreshold 10 and sigma 1.6 are the defaults of Lowe and OpenCV. The image
         # doubled for the first octave is made by the fast resize (enable_precise_upscale False), whose
         # quarter-pixel shift `detect` removes: OpenCV's precise upscale takes about 3% longer.
-        _SIFT[key] = cv2.SIFT_create(
-            settings.max_features, 3, settings.contrast_threshold, 10.0, 1.6, cv2.CV_8U, False
-        )
+        _SIFT[key] = cv2.SIFT_create(n, 3, settings.contrast_threshold, 10.0, 1.6, cv2.CV_8U, False)
     return _SIFT[key]
+
+
+#: With ``spread_cells``, SIFT keeps this many times ``max_features`` for :func:`spread` to choose from.
+SPREAD_OVERSAMPLE = 1.5
+
+
+def robust_contrast(image: NDArray[np.uint8]) -> float:
+    """The robust standard deviation of an image's grey levels: 1.4826 times their median absolute
+    deviation (from a 256-bin histogram), which neither bright specks nor dark shadows inflate."""
+    hist = cv2.calcHist([image], [0], None, [256], [0, 256]).ravel()
+    cdf = np.cumsum(hist)
+    median = int(np.searchsorted(cdf, cdf[-1] / 2))
+    dev = np.abs(np.arange(256) - median)
+    dev_hist = np.bincount(dev, weights=hist, minlength=256)
+    mad = int(np.searchsorted(np.cumsum(dev_hist), cdf[-1] / 2))
+    return 1.4826 * max(mad, 0.5)
+
+
+def stretch_contrast(image: NDArray[np.uint8], settings: FeatureSettings) -> tuple[NDArray[np.uint8], float]:
+    """The image stretched about its mean to ``settings.contrast_target_dn`` of robust contrast
+    (:func:`robust_contrast`), by at most ``settings.max_stretch`` and never reduced; and the stretch."""
+    if settings.contrast_target_dn <= 0:
+        return image, 1.0
+    gain = float(np.clip(settings.contrast_target_dn / robust_contrast(image), 1.0, settings.max_stretch))
+    if gain <= 1.0:
+        return image, 1.0
+    mean = float(cv2.mean(image)[0])
+    out = np.clip(image.astype(np.float32) * np.float32(gain) + np.float32(mean * (1.0 - gain)), 0, 255)
+    return np.rint(out).astype(np.uint8), gain
+
+
+def spread(
+    uv_px: FloatArray, response: FloatArray, width: int, height: int, n: int, cells: int
+) -> NDArray[np.intp]:
+    """Indices of ``n`` keypoints chosen round-robin over a ``cells`` x ``cells`` grid: every cell's
+    strongest, then every cell's second strongest, and so on (strongest first within a round)."""
+    if len(uv_px) <= n:
+        return np.arange(len(uv_px))
+    cu = np.clip((uv_px[:, 0] * cells // width).astype(np.intp), 0, cells - 1)
+    cv_ = np.clip((uv_px[:, 1] * cells // height).astype(np.intp), 0, cells - 1)
+    cell = cv_ * cells + cu
+    order = np.lexsort((-response, cell))  # by cell, strongest first
+    sorted_cell = cell[order]
+    first = np.searchsorted(sorted_cell, sorted_cell, side="left")
+    rank = np.empty(len(order), dtype=np.intp)
+    rank[order] = np.arange(len(order)) - first
+    chosen = np.lexsort((-response, rank))[:n]
+    return np.sort(chosen)
 
 
 def detect(image: NDArray[np.uint8], settings: FeatureSettings) -> Keypoints:
     """SIFT keypoints of an illumination-corrected grey image (:func:`correct_illumination`), in
-    full-image pixel coordinates."""
+    full-image pixel coordinates: on the image stretched to ``settings.contrast_target_dn``
+    (:func:`stretch_contrast`), spread over the image when ``settings.spread_cells`` is set."""
     h, w = image.shape[:2]
     scale = settings.scale_for(w)
     if scale < 1:
@@ -152,16 +250,27 @@ def detect(image: NDArray[np.uint8], settings: FeatureSettings) -> Keypoints:
         small = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
     else:
         small = image
+    small, _ = stretch_contrast(small, settings)
     sx, sy = small.shape[1] / w, small.shape[0] / h
     kps, desc = _sift(settings).detectAndCompute(small, None)
+    if len(kps) < settings.retry_fraction * settings.max_features:
+        lower = replace(settings, contrast_threshold=0.5 * settings.contrast_threshold, retry_fraction=0.0)
+        kps, desc = _sift(lower).detectAndCompute(small, None)
     if not kps:
         return Keypoints(np.zeros((0, 2)), np.zeros(0), np.zeros((0, 128), dtype=np.uint8))
     # The doubled image's pixel x shows the input at x/2 - 1/4 (cv2.resize aligns pixel centres), but
     # SIFT reports x/2: every keypoint lies a quarter pixel right of and below its feature.
     pt = np.array([k.pt for k in kps], dtype=float) - UPSCALE_SHIFT_PX
+    desc = np.asarray(desc, dtype=np.uint8)
+    size = np.array([k.size for k in kps], dtype=float)
+    if settings.spread_cells > 0 and len(kps) > settings.max_features:
+        response = np.array([k.response for k in kps], dtype=float)
+        keep = spread(
+            pt, response, small.shape[1], small.shape[0], settings.max_features, settings.spread_cells
+        )
+        pt, desc, size = pt[keep], desc[keep], size[keep]
     uv = np.column_stack([(pt[:, 0] + 0.5) / sx - 0.5, (pt[:, 1] + 0.5) / sy - 0.5])
-    size = np.array([k.size for k in kps], dtype=float) / sx
-    return Keypoints(uv, size, np.asarray(desc, dtype=np.uint8))
+    return Keypoints(uv, size / sx, desc)
 
 
 #: The largest SIFT descriptor component OpenCV gives (components of the unit vector are clipped at 0.2,

@@ -31,12 +31,50 @@ class VisionSettings:
     feature_scale: float | None = setting(
         None, "Resize factor for SIFT (default: to 680 px wide, half of 1360).", minimum=1e-3, maximum=1.0
     )
+    features: int = setting(1500, "Keypoints kept per image, strongest first.", minimum=10, maximum=20000)
+    feature_contrast: float = setting(
+        0.02,
+        "SIFT's contrast threshold (OpenCV contrastThreshold), on the image stretched to --contrast-target.",
+        minimum=1e-4,
+        maximum=1.0,
+    )
+    contrast_target: float = setting(
+        32.0,
+        "Before SIFT, stretch the illumination-corrected image until the robust standard deviation of its "
+        "grey levels is this many digital numbers (at most 8 times; never reduced); 0: no stretch.",
+        minimum=0.0,
+        maximum=128.0,
+    )
+    edge_reject: float = setting(
+        0.5,
+        "Edge-safe stereo: drop a stereo match whose disparity moves by more than this many pixels (at the "
+        "SIFT scale, or 5 times the pair's lower quartile in noisy images) when its patch is shifted by half its "
+        "side (it straddles a depth edge); 0: off.",
+        minimum=0.0,
+        maximum=100.0,
+    )
+    feature_spread: int = setting(
+        0,
+        "Choose the keypoints round-robin over an N x N grid of the image (well spread) instead of the "
+        "strongest wherever they are; 0: off.",
+        minimum=0,
+        maximum=64,
+    )
 
     def loop_settings(self) -> LoopSettings:
         from auvnav.vision.features import FeatureSettings
         from auvnav.vision.loops import LoopSettings
 
-        return LoopSettings(features=FeatureSettings(scale=self.feature_scale))
+        return LoopSettings(
+            features=FeatureSettings(
+                scale=self.feature_scale,
+                max_features=self.features,
+                contrast_threshold=self.feature_contrast,
+                contrast_target_dn=self.contrast_target,
+                spread_cells=self.feature_spread,
+                edge_reject_px=self.edge_reject,
+            )
+        )
 
 
 def prior_file(dive: Path) -> Path | None:

@@ -11,6 +11,10 @@ would give, and a second SIFT pass over the right image is not needed: it halves
 Both images are illumination-corrected first: the strobe's falloff and the vignetting differ between
 the two views of a surface point, and a brightness gradient across the tracked patch would bias the
 disparity (a tilt of the whole point cloud).
+Edge-safe stereo: a patch that straddles a depth discontinuity (a ledge, a boulder's side) holds two
+disparities and the tracker settles between them; such a match is found by tracking the window shifted
+by half its side in four directions (:func:`disparity_spread`), dropped when the disparity moves by
+more than ``edge_reject_px``, and otherwise given that spread as extra disparity noise.
 Each match is triangulated with a first-order covariance from the keypoint noise
 (:func:`~auvnav.vision.camera.triangulate`): the left keypoint's detection noise is common to both
 images, the tracker's (measured from the rows of the matches, :func:`split_noise`) independent.
@@ -21,8 +25,9 @@ modification time, the calibration, the settings), so reruns do no work twice. A
 the points and covariances are made from, compressed: the four rectified coordinates of each match on a
 1/256-pixel grid (the matches are put on that grid before they are triangulated, so a point read back
 is the point computed, bit for bit), the two noise figures and the rectified geometry, and the
-descriptors as :func:`~auvnav.vision.features.compand_descriptors` gives them (4 bits each). About
-80 KB a pair at half scale where single-precision records took 260 KB.
+descriptors as :func:`~auvnav.vision.features.compand_descriptors` gives them (4 bits each), and each
+match's disparity spread (one byte). About 80 KB a pair at half scale where single-precision records
+took 260 KB (46 KB on the check dive in turbid water, fewer matches).
 """
 
 from __future__ import annotations
@@ -55,13 +60,25 @@ from auvnav.vision.features import FeatureSettings, compand_descriptors, correct
 log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
-CACHE_VERSION = 5
+CACHE_VERSION = 6
 #: Rectified coordinates are kept on a grid of 1/GRID_PER_PX pixel (0.004 px, well under the tracker's
 #: few hundredths).
 GRID_PER_PX = 256
-_MAGIC = b"AUVNAVF5"
+#: The disparity spread of each match (:func:`disparity_spread`) is kept on a grid of 1/EDGE_PER_PX pixel,
+#: one byte (up to 255/64 = 4 px, beyond any ``edge_reject_px`` that keeps a match).
+EDGE_PER_PX = 64
+#: A match's extra disparity noise, 1-sigma, per pixel of its disparity spread: the RMS disparity error of
+#: the matches (with ``edge_reject_px`` 3.9) grows as about a third of their spread (0.035 px at spreads
+#: below 0.1 px, 0.11 px at 0.2-0.35, 0.22 px at 0.5-1; ``benchmarks/bench_stereo_edges.py``).
+EDGE_SIGMA_PER_SPREAD = 1.0 / 3.0
+#: In noisy images (turbid water) the shifted windows' disparities scatter on flat ground too: a match
+#: is dropped only when its spread exceeds ``edge_reject_px`` and this many times the lower quartile of
+#: the pair's spreads (its tracking noise: 0.06-0.19 px on the check dive in clear water, 0.2-1.1 px in
+#: turbid water, 0.09 px on scenes crowded with steps, where the 0.5 px default holds).
+EDGE_NOISE_FACTOR = 5.0
+_MAGIC = b"AUVNAVF6"
 # magic, matches, f, baseline, cx, cy, R1 (9), sigma common, sigma independent, bytes of each blob
-_HEADER = struct.Struct("<8sI15dII")
+_HEADER = struct.Struct("<8sI15dIII")
 
 
 @dataclass(frozen=True)
@@ -82,6 +99,11 @@ class StereoFeatures:
         (:func:`~auvnav.vision.features.compand_descriptors`).
     sigma_px : (float, float)
         The keypoint noise's parts common to and independent between the images (:func:`split_noise`).
+    edge_px : ndarray, shape (N,), optional
+        Each match's disparity spread over shifted windows (:func:`disparity_spread`), rectified
+        pixels on a 1/:data:`EDGE_PER_PX` grid: an extra independent disparity noise of
+        :data:`EDGE_SIGMA_PER_SPREAD` times it, 1-sigma, in the point's covariance (a match near a
+        depth edge counts for less). None: zeros.
     """
 
     uv_rect_px: FloatArray
@@ -89,14 +111,18 @@ class StereoFeatures:
     cov_cam_m2: FloatArray
     descriptors: NDArray[np.uint8]
     sigma_px: tuple[float, float] = (0.0, 0.0)
+    edge_px: FloatArray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.p_cam_m)
+        if self.edge_px is None:
+            object.__setattr__(self, "edge_px", np.zeros(n))
         shapes = {
             "uv_rect_px": (np.shape(self.uv_rect_px), (n, 4)),
             "p_cam_m": (np.shape(self.p_cam_m), (n, 3)),
             "cov_cam_m2": (np.shape(self.cov_cam_m2), (n, 3, 3)),
             "descriptors": (np.shape(self.descriptors), (n, 128)),
+            "edge_px": (np.shape(self.edge_px), (n,)),
         }
         for name, (found, want) in shapes.items():
             if found != want:
@@ -119,12 +145,13 @@ def stereo_features(
     kl = detect(flat_left, settings)
     rl = rectify_points(kl.uv_px, rig.left, rect.R1, rect.P1)
     flat = rectify_images(flat_left, flat_right, rig, rect)
-    rr, ok = track_right(rl, *flat, rect, settings)
+    rr, ok, spread = track_right(rl, *flat, rect, settings)
     scale = settings.scale_for(left.shape[1])
     sigma = split_noise(rr[ok, 1] - rl[ok, 1], settings.sigma_px / scale)
     uv = np.round(np.column_stack([rl[ok], rr[ok]]) * GRID_PER_PX) / GRID_PER_PX
-    p, cov = triangulate(uv[:, :2], uv[:, 2:], rect, *sigma)
-    return StereoFeatures(uv, p, cov, compand_descriptors(kl.descriptors[ok]), sigma)
+    edge = np.minimum(np.round(spread[ok] * EDGE_PER_PX), 255) / EDGE_PER_PX
+    p, cov = triangulate(uv[:, :2], uv[:, 2:], rect, *sigma, sigma_disparity_px=EDGE_SIGMA_PER_SPREAD * edge)
+    return StereoFeatures(uv, p, cov, compand_descriptors(kl.descriptors[ok]), sigma, edge)
 
 
 def track_right(
@@ -133,21 +160,25 @@ def track_right(
     right_rect: NDArray[np.uint8],
     rect: Rectification,
     settings: FeatureSettings,
-) -> tuple[FloatArray, NDArray[np.bool_]]:
+) -> tuple[FloatArray, NDArray[np.bool_], FloatArray]:
     """Where rectified left keypoints ``rl`` (N, 2) lie in the rectified right image, by pyramidal
-    Lucas-Kanade, and which are trusted.
+    Lucas-Kanade, which are trusted, and how far each one's disparity moves when its window is shifted
+    (:func:`disparity_spread`, pixels; 0 where not trusted).
 
     The scene's dominant disparity comes from phase correlation of the two images (:func:`image_shift`);
     a first pass on a sample of the keypoints, from that disparity, finds the scene's median disparity
     (over the plausible matches only); every keypoint is then tracked from that disparity, and tracked
     back. A match is kept when both passes converge, the round trip returns within
     ``max_round_trip_px``, it stays within ``stereo_gate_px`` of its row and its disparity puts the
-    point between ``min_range_m`` and ``max_range_m``. Returns the right positions (N, 2) and the mask.
+    point between ``min_range_m`` and ``max_range_m``, and, edge-safe stereo, its disparity moves by at
+    most ``edge_reject_px`` (or :data:`EDGE_NOISE_FACTOR` times the lower quartile over the pair's
+    matches, whichever is larger) when the window is shifted by half its side (a patch across a depth
+    discontinuity does not). Returns the right positions (N, 2), the mask and the shifts' spread.
     """
     n = len(rl)
     ok = np.zeros(n, dtype=bool)
     if n == 0:
-        return np.zeros((0, 2)), ok
+        return np.zeros((0, 2)), ok, np.zeros(0)
     scale = settings.scale_for(left_rect.shape[1])
     window = 2 * round(settings.lk_window_px / scale / 2) + 1
     lk = {
@@ -173,7 +204,7 @@ def track_right(
     q, st, _ = cv2.calcOpticalFlowPyrLK(left_rect, right_rect, sample, guess, maxLevel=3, flags=flags, **lk)
     vote = (st[:, 0] == 1) & plausible(sample, q)
     if not vote.any():
-        return np.zeros((n, 2)), ok
+        return np.zeros((n, 2)), ok, np.zeros(n)
     guess = p0.copy()
     guess[:, 0, 0] -= float(np.median(sample[vote, 0, 0] - q[vote, 0, 0]))
     q, st, _ = cv2.calcOpticalFlowPyrLK(left_rect, right_rect, p0, guess, maxLevel=2, flags=flags, **lk)
@@ -182,7 +213,59 @@ def track_right(
     )
     fb = scale * np.linalg.norm(back[:, 0] - p0[:, 0], axis=1)
     ok = (st[:, 0] == 1) & (st_back[:, 0] == 1) & (fb <= settings.max_round_trip_px) & plausible(p0, q)
-    return q[:, 0].astype(float), ok
+    if settings.edge_reject_px > 0:
+        spread = np.full(n, np.inf)
+        spread[ok] = disparity_spread(p0[ok], q[ok], left_rect, right_rect, window)
+        # relative to the image's own tracking noise: most matches lie on one surface
+        finite = spread[ok][np.isfinite(spread[ok])]
+        noise = EDGE_NOISE_FACTOR * float(np.percentile(finite, 25)) * scale if len(finite) else 0.0
+        ok &= spread * scale <= max(settings.edge_reject_px, noise)
+    else:
+        spread = np.zeros(n)
+    return q[:, 0].astype(float), ok, np.where(ok, spread, 0.0)
+
+
+def disparity_spread(
+    p: NDArray[np.float32],
+    q: NDArray[np.float32],
+    left: NDArray[np.uint8],
+    right: NDArray[np.uint8],
+    window: int,
+) -> FloatArray:
+    """How much the disparity of matches ``p`` -> ``q`` (N, 1, 2) changes when the tracked window is
+    shifted by half its side left, right, up and down (pixels: the largest change; infinite when the
+    tracker loses a shifted window, which is skipped where it would leave the image). The keypoint lies
+    in all five windows; a patch that straddles a depth discontinuity has shifted windows on either
+    side of it, at the two depths' disparities, and one on a single surface has the same disparity in
+    all of them (the "shiftable windows" of stereo matching: Bobick and Intille 1999, "Large occlusion
+    stereo", IJCV 33(3); Hirschmueller, Innocent and Garibaldi 2002, "Real-time correlation-based
+    stereo vision with reduced border errors", IJCV 47(1-3))."""
+    lk = {
+        "winSize": (window, window),
+        "criteria": (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 0.01),
+    }
+    h = window // 2
+    d0 = p[:, 0, 0] - q[:, 0, 0]
+    spread = np.zeros(len(p))
+    for du, dv in ((-h, 0), (h, 0), (0, -h), (0, h)):
+        shift = np.array([du, dv], dtype=np.float32)
+        ps = np.ascontiguousarray(p + shift)
+        qs, st, _ = cv2.calcOpticalFlowPyrLK(
+            left,
+            right,
+            ps,
+            np.ascontiguousarray(q + shift),
+            maxLevel=0,
+            flags=cv2.OPTFLOW_USE_INITIAL_FLOW,
+            **lk,
+        )
+        inside = (ps[:, 0, 0] >= h) & (ps[:, 0, 0] < left.shape[1] - h)
+        inside &= (ps[:, 0, 1] >= h) & (ps[:, 0, 1] < left.shape[0] - h)
+        change = np.abs(ps[:, 0, 0] - qs[:, 0, 0] - d0) + np.abs(
+            qs[:, 0, 1] - ps[:, 0, 1] - (q[:, 0, 1] - p[:, 0, 1])
+        )
+        spread = np.where(inside, np.maximum(spread, np.where(st[:, 0] == 1, change, np.inf)), spread)
+    return spread
 
 
 def image_shift(a: NDArray[np.uint8], b: NDArray[np.uint8], width_px: int = 170) -> tuple[float, float]:
@@ -243,6 +326,8 @@ def write_features(features: StereoFeatures, rect: Rectification, path: Path) ->
     geometry = zlib.compress(grid.view(np.uint8).reshape(len(grid), 4, 4).transpose(1, 2, 0).tobytes(), 6)
     q = features.descriptors
     descriptors = zlib.compress((q[:, ::2] << 4 | q[:, 1::2]).astype(np.uint8).tobytes(), 6)
+    edge_px = np.zeros(len(features)) if features.edge_px is None else features.edge_px
+    edge = zlib.compress(np.minimum(np.round(edge_px * EDGE_PER_PX), 255).astype(np.uint8).tobytes(), 6)
     header = _HEADER.pack(
         _MAGIC,
         len(features),
@@ -254,8 +339,9 @@ def write_features(features: StereoFeatures, rect: Rectification, path: Path) ->
         *features.sigma_px,
         len(geometry),
         len(descriptors),
+        len(edge),
     )
-    atomic_write(path, lambda p: p.write_bytes(header + geometry + descriptors))
+    atomic_write(path, lambda p: p.write_bytes(header + geometry + descriptors + edge))
 
 
 def read_features(path: Path | str) -> StereoFeatures:
@@ -265,23 +351,28 @@ def read_features(path: Path | str) -> StereoFeatures:
     if len(data) < _HEADER.size or not data.startswith(_MAGIC):
         raise ValueError("not a feature cache file of this version")
     _, n, f, b, cx, cy, *rest = _HEADER.unpack_from(data)
-    R1, (sc, si), (ng, nd) = np.array(rest[:9]).reshape(3, 3), rest[9:11], rest[11:13]
+    R1, (sc, si), (ng, nd, ne) = np.array(rest[:9]).reshape(3, 3), rest[9:11], rest[11:14]
     start = _HEADER.size
-    if len(data) != start + ng + nd:
-        raise ValueError(f"truncated feature cache file ({len(data)} bytes, expected {start + ng + nd})")
+    if len(data) != start + ng + nd + ne:
+        raise ValueError(f"truncated feature cache file ({len(data)} bytes, expected {start + ng + nd + ne})")
     try:
         grid = np.frombuffer(zlib.decompress(data[start : start + ng]), dtype=np.uint8)
-        packed = np.frombuffer(zlib.decompress(data[start + ng :]), dtype=np.uint8)
+        packed = np.frombuffer(zlib.decompress(data[start + ng : start + ng + nd]), dtype=np.uint8)
+        edge_q = np.frombuffer(zlib.decompress(data[start + ng + nd :]), dtype=np.uint8)
     except zlib.error as err:
         raise ValueError(f"corrupt feature cache file ({err})") from None
-    if grid.size != 16 * n or packed.size != 64 * n:
+    if grid.size != 16 * n or packed.size != 64 * n or edge_q.size != n:
         raise ValueError("corrupt feature cache file (sizes disagree with its header)")
     uv = grid.reshape(4, 4, n).transpose(2, 0, 1).copy().view("<i4").reshape(n, 4) / GRID_PER_PX
     desc = np.empty((n, 128), dtype=np.uint8)
     desc[:, ::2] = packed.reshape(n, 64) >> 4
     desc[:, 1::2] = packed.reshape(n, 64) & 15
-    p, cov = triangulate(uv[:, :2], uv[:, 2:], StereoGeometry(f, cx, cy, b, R1), sc, si)
-    return StereoFeatures(uv, p, cov, desc, (sc, si))
+    edge = edge_q / EDGE_PER_PX
+    geometry = StereoGeometry(f, cx, cy, b, R1)
+    p, cov = triangulate(
+        uv[:, :2], uv[:, 2:], geometry, sc, si, sigma_disparity_px=EDGE_SIGMA_PER_SPREAD * edge
+    )
+    return StereoFeatures(uv, p, cov, desc, (sc, si), edge)
 
 
 def pair_features(

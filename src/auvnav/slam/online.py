@@ -1,0 +1,194 @@
+"""SLAM as the vehicle would run it: the dive replayed in time order, batched iSAM2 updates.
+
+The replay (``auvnav slam DIVE --online``) adds the graph's poses in time order,
+``poses_per_update`` per iSAM2 update (:data:`auvnav.slam.graph.DEFAULT_POSES_PER_UPDATE`: one update
+every 10 s for a camera at 1 Hz; batched iSAM2, not a fixed-lag smoother: the whole dive stays in the
+Bayes tree, so a loop closure back to the start of the dive corrects everything between). Each update
+brings the sensor factors of its poses (DVL odometry, attitude, depth, compass, fixes) and the loop
+closures that the vehicle knows by the time of the update's last pose:
+
+- a loop closure between images ``i`` and ``j`` is found when the front end has processed the later
+  image, ``latency_s`` after it was taken (the front end's time per stereo pair, 1 / its measured
+  throughput, or a given figure);
+- it is then held until its pairwise-consistency decision is made (:mod:`auvnav.slam.pcm`, causal:
+  kept as soon as :data:`auvnav.slam.pcm.EARLY_SUPPORT` loop closures known by then agree with it
+  and none disagrees, else decided once the poses :data:`auvnav.slam.pcm.WINDOW_POSES` after its
+  later end are in), and added only if kept, with the next update.
+
+The Cauchy kernel stays on every loop closure added (no graduation: an online solver meets each loop
+closure once). The estimate of each image pose as it was known when the update that added it
+finished is the online trajectory (``products/slam/online.csv``); the smoother's estimate after the
+last update is the stage's trajectory. Each update is timed (building its factors, the iSAM2 update,
+reading the estimates of its poses).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import gtsam
+import numpy as np
+from numpy.typing import NDArray
+
+from auvnav.frames import FloatArray
+from auvnav.slam.compass import COEFFICIENTS_KEY
+from auvnav.slam.graph import SensorGraph
+from auvnav.slam.pcm import LoopSelection, select_loops
+from auvnav.slam.poses import pose_key
+from auvnav.slam.solve import PoseGraphSolveError
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class OnlineRecord:
+    """What the vehicle knew, update by update.
+
+    Parameters
+    ----------
+    T_known : ndarray, shape (P, 4, 4)
+        Each pose's estimate when the update that added it finished.
+    known_s : ndarray, shape (P,)
+        The dive time (POSIX seconds) of that update: the time of its last pose.
+    update_seconds : ndarray, shape (U,)
+        Wall time of each update.
+    update_poses : ndarray of int64, shape (U,)
+        Poses each update added.
+    update_loops : ndarray of int64, shape (U,)
+        Loop closures each update added.
+    selection : LoopSelection
+        The causal pairwise-consistency decisions.
+    latency_s : float
+        The front end's latency used.
+    loop_delay_s : ndarray, shape (A,)
+        For each loop closure added: the dive time of its update less the time of its later image.
+    """
+
+    T_known: FloatArray
+    known_s: FloatArray
+    update_seconds: FloatArray
+    update_poses: NDArray[np.int64]
+    update_loops: NDArray[np.int64]
+    selection: LoopSelection
+    latency_s: float
+    loop_delay_s: FloatArray
+
+    def per_pose_ms(self) -> FloatArray:
+        """Each update's wall time divided by the poses it added, one value per pose, ms."""
+        return np.repeat(1e3 * self.update_seconds / self.update_poses, self.update_poses)
+
+    def summary(self) -> dict[str, float | int]:
+        per_pose = self.per_pose_ms()
+        return {
+            "updates": len(self.update_seconds),
+            "poses_per_update": int(np.max(self.update_poses)),
+            "loop_latency_s": self.latency_s,
+            "loops_added": int(self.update_loops.sum()),
+            "update_median_ms": float(np.median(per_pose)),
+            "update_p95_ms": float(np.percentile(per_pose, 95)),
+            "update_max_ms": float(np.max(per_pose)),
+            "whole_update_median_ms": float(1e3 * np.median(self.update_seconds)),
+            "whole_update_p95_ms": float(1e3 * np.percentile(self.update_seconds, 95)),
+            "loop_delay_median_s": float(np.median(self.loop_delay_s)) if len(self.loop_delay_s) else 0.0,
+        }
+
+
+def replay(
+    sg: SensorGraph, poses_per_update: int, latency_s: float, *, select: bool = True
+) -> tuple[gtsam.Values, OnlineRecord]:
+    """Replay a sensor graph in time order (module docstring).
+
+    ``select=False`` adds every loop closure as soon as it is found (the kernel alone against false ones).
+
+    Returns
+    -------
+    gtsam.Values
+        The smoother's estimate after the last update.
+    OnlineRecord
+    """
+    if poses_per_update < 1 or not latency_s >= 0:
+        raise ValueError("poses_per_update must be at least 1 and latency_s non-negative")
+    P = len(sg.times)
+    t = sg.times.t_s
+    if select:
+        selection = select_loops(sg.pose_graph, P - 1, causal=True)
+    else:
+        n = sg.pose_graph.n_edges - (P - 1)
+        later = np.maximum(sg.pose_graph.edge_i, sg.pose_graph.edge_j)[P - 1 :].astype(np.int64)
+        none = np.zeros(n, dtype=np.int64)
+        selection = LoopSelection(np.ones(n, dtype=bool), none, none, later, 0)
+    is_loop = np.array([kind == "loop" for kind in sg.kinds], dtype=bool)
+    loop_factor = np.flatnonzero(is_loop)
+    # The pose after whose update each factor is added: sensor factors with their last pose, loop
+    # closures when found and decided; rejected loop closures never.
+    due_time = np.full(len(sg.factors), -np.inf)
+    due_time[loop_factor] = t[np.minimum(selection.decided_at, P - 1)] + latency_s
+    due_pose = sg.last_pose.copy()
+    due_pose[loop_factor] = np.searchsorted(t, due_time[loop_factor], side="left")
+    skip = np.zeros(len(sg.factors), dtype=bool)
+    skip[loop_factor] = ~selection.keep
+
+    params = gtsam.ISAM2Params()
+    params.setFactorization("QR")  # as the batch iSAM2 (optimize._isam2): Cholesky fails on dive graphs
+    isam = gtsam.ISAM2(params)
+    firsts = np.arange(0, P, poses_per_update)
+    lasts = np.minimum(firsts + poses_per_update, P) - 1
+    # Factors by the update that adds them (loop closures due after the last pose: the last update).
+    update_of = np.searchsorted(lasts, np.clip(due_pose, -1, P - 1), side="left")
+    update_of = np.clip(update_of, 0, len(firsts) - 1)
+    order = np.argsort(update_of, kind="stable")
+    bounds = np.searchsorted(update_of[order], np.arange(len(firsts) + 1))
+    T_known = np.empty((P, 4, 4))
+    known_s = np.empty(P)
+    seconds = np.empty(len(firsts))
+    loops_added = np.zeros(len(firsts), dtype=np.int64)
+    later = np.maximum(sg.pose_graph.edge_i, sg.pose_graph.edge_j)[P - 1 :]
+    loop_number = np.cumsum(is_loop) - 1
+    delays: list[float] = []
+    current = sg.initial[0]
+    for u, (first, last) in enumerate(zip(firsts, lasts, strict=True)):
+        start = time.perf_counter()
+        new_factors = gtsam.NonlinearFactorGraph()
+        new_values = gtsam.Values()
+        if first == 0 and sg.compass.estimate:
+            new_values.insert(COEFFICIENTS_KEY, np.zeros(sg.compass.n_coefficients))
+        for k in range(first, last + 1):
+            if k > 0:
+                current = current @ sg.pose_graph.T_ij[k - 1]
+            new_values.insert(pose_key(k), gtsam.Pose3(current))
+        for f in order[bounds[u] : bounds[u + 1]]:
+            if not skip[f]:
+                new_factors.add(sg.factors[f])
+                if is_loop[f]:
+                    loops_added[u] += 1
+                    delays.append(float(t[last] - t[later[loop_number[f]]]))
+        try:
+            isam.update(new_factors, new_values)
+            for k in range(first, last + 1):
+                T_known[k] = isam.calculateEstimatePose3(pose_key(k)).matrix()
+        except RuntimeError as err:
+            message = " ".join(str(err).strip().split("\n\n")[0].split())
+            raise PoseGraphSolveError(f"iSAM2 failed adding poses {first} to {last}: {message}") from None
+        current = T_known[last]
+        known_s[first : last + 1] = t[last]
+        seconds[u] = time.perf_counter() - start
+    values = isam.calculateEstimate()
+    record = OnlineRecord(
+        T_known=T_known,
+        known_s=known_s,
+        update_seconds=seconds,
+        update_poses=(lasts - firsts + 1).astype(np.int64),
+        update_loops=loops_added,
+        selection=selection,
+        latency_s=float(latency_s),
+        loop_delay_s=np.array(delays),
+    )
+    log.info(
+        "online: %d updates, %d loop closures added, median %.1f ms per pose",
+        len(firsts),
+        int(loops_added.sum()),
+        float(np.median(record.per_pose_ms())),
+    )
+    return values, record
