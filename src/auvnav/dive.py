@@ -35,9 +35,18 @@ from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, mo
 from pydantic import Field as PydanticField
 
 from auvnav.config import cut, dump_yaml, load_yaml, outside, pydantic_problems, quote
-from auvnav.errors import DiveFormatError, OutputExistsError, Problem
+from auvnav.errors import AuvnavError, DiveFormatError, OutputExistsError, Problem
 from auvnav.frames import GeodeticOrigin
-from auvnav.streams import Field, Stream, flag_rows, looks_like_radians, read_table, within, write_stream
+from auvnav.streams import (
+    Field,
+    Stream,
+    flag_rows,
+    looks_like_radians,
+    read_stream,
+    read_table,
+    within,
+    write_stream,
+)
 from auvnav.vehicle import (
     Vehicle,
     calibration_files,
@@ -532,6 +541,29 @@ def image_files(path: Path, index: ImageIndex, *, allow_outside: bool = False) -
                 continue
         out[f"images/{name}"] = file
     return out
+
+
+def read_image_index(path: Path) -> ImageIndex | None:
+    """The dive's camera log (``images/index.csv``), None when it has none."""
+    file = find_stream_file(Path(path), ImageIndex.FILE)
+    return None if file is None else read_stream(ImageIndex, file, str(file.relative_to(path)))
+
+
+def image_inputs(path: Path) -> dict[str, Path]:
+    """What a stage that reads the images depends on: the dive's files, its camera log and every image
+    the log names that exists (none when the log cannot be read: the stage's own check says why)."""
+    path = Path(path)
+    files = dive_files(path)
+    index_file = find_stream_file(path, ImageIndex.FILE)
+    if index_file is not None:
+        files[str(index_file.relative_to(path))] = index_file
+        try:
+            index = read_image_index(path)
+        except AuvnavError:
+            index = None
+        if index is not None:
+            files.update(image_files(path, index))
+    return files
 
 
 def outside_inputs(path: Path, files: dict[str, Path]) -> dict[str, Path]:

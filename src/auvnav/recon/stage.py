@@ -20,10 +20,18 @@ from pathlib import Path
 from typing import Any, Literal
 
 from auvnav import products as P
-from auvnav.dive import ImageIndex, dive_files, find_stream_file, image_files, read_dive, vehicle_file_name
+from auvnav.dive import (
+    ImageIndex,
+    find_stream_file,
+    image_files,
+    image_inputs,
+    read_dive,
+    read_image_index,
+    vehicle_file_name,
+)
 from auvnav.errors import AuvnavError, InsufficientDataError
 from auvnav.stagekit import Stage, StageContext, StageSkipped, setting, settings_mapping
-from auvnav.streams import read_stream, write_json
+from auvnav.streams import write_json
 
 log = logging.getLogger(__name__)
 
@@ -155,16 +163,11 @@ def tide_file(dive: Path, settings: ReconSettings) -> tuple[Path | None, str]:
     return None, ""
 
 
-def _index(dive: Path) -> ImageIndex | None:
-    path = find_stream_file(dive, ImageIndex.FILE)
-    return None if path is None else read_stream(ImageIndex, path, str(path.relative_to(dive)))
-
-
 def _unavailable(dive: Path, settings: ReconSettings) -> str | None:
     if find_stream_file(dive, ImageIndex.FILE) is None:
         return "reconstruction needs stereo images: the dive has no images/index.csv"
     try:
-        index = _index(dive)
+        index = read_image_index(dive)
         name = vehicle_file_name(dive)
         vehicle = None
         if name is not None:
@@ -185,16 +188,7 @@ def _unavailable(dive: Path, settings: ReconSettings) -> str | None:
 
 
 def _inputs(dive: Path, settings: ReconSettings) -> dict[str, Path]:
-    files = dive_files(dive)
-    index_file = find_stream_file(dive, ImageIndex.FILE)
-    if index_file is not None:
-        files[str(index_file.relative_to(dive))] = index_file
-        try:
-            index = _index(dive)
-        except AuvnavError:
-            index = None
-        if index is not None:
-            files.update(image_files(dive, index))
+    files = image_inputs(dive)
     chosen = trajectory_file(dive, settings.trajectory)
     if chosen is not None:
         files[str(chosen[1].relative_to(dive))] = chosen[1]

@@ -12,10 +12,18 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from auvnav import products as P
-from auvnav.dive import ImageIndex, dive_files, find_stream_file, image_files, read_dive, vehicle_file_name
+from auvnav.dive import (
+    ImageIndex,
+    find_stream_file,
+    image_files,
+    image_inputs,
+    read_dive,
+    read_image_index,
+    vehicle_file_name,
+)
 from auvnav.errors import AuvnavError, InsufficientDataError
 from auvnav.stagekit import Stage, StageContext, setting
-from auvnav.streams import read_stream, write_json
+from auvnav.streams import write_json
 from auvnav.trajectory import Trajectory, read_trajectory
 from auvnav.vehicle import read_vehicle
 from auvnav.vision.loopfile import write_loops
@@ -95,16 +103,11 @@ def read_prior(dive: Path) -> Trajectory:
     return read_trajectory(path)
 
 
-def _index(dive: Path) -> ImageIndex | None:
-    path = find_stream_file(dive, ImageIndex.FILE)
-    return None if path is None else read_stream(ImageIndex, path, str(path.relative_to(dive)))
-
-
 def _unavailable(dive: Path, settings: VisionSettings) -> str | None:
     if find_stream_file(dive, ImageIndex.FILE) is None:
         return "the dive has no images (images/index.csv)"
     try:
-        index = _index(dive)
+        index = read_image_index(dive)
         name = vehicle_file_name(dive)
         vehicle = None if name is None else read_vehicle(dive / name)
     except AuvnavError:
@@ -119,16 +122,7 @@ def _unavailable(dive: Path, settings: VisionSettings) -> str | None:
 
 
 def _inputs(dive: Path, settings: VisionSettings) -> dict[str, Path]:
-    files = dive_files(dive)
-    index_file = find_stream_file(dive, ImageIndex.FILE)
-    if index_file is not None:
-        files[str(index_file.relative_to(dive))] = index_file
-        try:
-            index = _index(dive)
-        except AuvnavError:
-            index = None
-        if index is not None:
-            files.update(image_files(dive, index))
+    files = image_inputs(dive)
     prior = prior_file(dive)
     if prior is not None:
         files[str(prior.relative_to(dive))] = prior
