@@ -8,7 +8,7 @@ an earlier run, and every other kind of file), runs one command, and checks:
 - exit code 1, and stderr is exactly one line: ``auvnav: error: ...`` naming the file (a
   traceback would be more lines);
 - peak memory under :data:`MAX_MEMORY_MB`: for the cases run in this process, the process's peak
-  resident set after the command less its resident set before; for the heavy ones (an alias bomb,
+  resident set during the command (reset before it) less its resident set before; for the heavy ones (an alias bomb,
   a 200 MB field, deep nesting, a 17 MB YAML file, far waypoints), the peak resident set
   (``VmHWM``) of a fresh process;
 - nothing changed under ``DIVE/products/`` (the lock file and the file-hash cache of the pipeline
@@ -26,7 +26,6 @@ import hashlib
 import importlib.util
 import io
 import os
-import resource
 import shutil
 import subprocess
 import sys
@@ -1078,16 +1077,25 @@ def _rss_mb() -> float:
         return int(statm.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
+def _peak_rss_mb() -> float:
+    """The process's peak resident set (``VmHWM``) since it was last reset, MB."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    raise AssertionError("no VmHWM in /proc/self/status")
+
+
 def _run_here(args: list[str]) -> tuple[int, str, float]:
-    """Exit code, stderr and a bound on the extra memory (MB) of a command run in this process:
-    the process's peak resident set after it, less its resident set before (C allocations
+    """Exit code, stderr and the extra memory (MB) of a command run in this process: its peak
+    resident set during the command (reset before it through ``/proc/self/clear_refs``, so what an
+    earlier test of this worker used does not count), less its resident set before (C allocations
     included; tracemalloc would miss them and make the run five times slower)."""
     err, out = io.StringIO(), io.StringIO()
+    Path("/proc/self/clear_refs").write_text("5")
     before = _rss_mb()
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
         code = main(args)
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    return code, err.getvalue(), max(peak - before, 0.0)
+    return code, err.getvalue(), max(_peak_rss_mb() - before, 0.0)
 
 
 def _run_fresh(args: list[str], tmp: Path) -> tuple[int, str, float]:
