@@ -46,7 +46,7 @@ import numpy as np
 from pydantic import Field as PydanticField
 
 from auvnav.config import quote
-from auvnav.dive import AttitudeStream, DvlStream, GpsStream, UsblStream, read_dive
+from auvnav.dive import AttitudeStream, DvlStream, GpsStream, UsblStream
 from auvnav.errors import ConfigError, InsufficientDataError
 from auvnav.frames import GeodeticOrigin, ned2geodetic, rot2euler
 from auvnav.io.common import (
@@ -485,26 +485,11 @@ _STEREO_HEADER = """\
 
 def export_stereo_pose(dive_path: Path, out: Path, options: Any) -> dict[str, Any]:
     """Write ``stereo_pose_est.data``: the left camera's pose at every stereo pair."""
-    from auvnav.io.tracks import read_track
-    from auvnav.vision.camera import T_body_cam
+    from auvnav.io.tracks import camera_track
 
-    dive = read_dive(dive_path)
-    if dive.images is None or len(dive.images) == 0:
-        raise InsufficientDataError(f"{dive_path}/images/index.csv: acfr-stereo-pose needs the stereo pairs")
-    rig = dive.vehicle.stereo
-    if rig is None:
-        raise ConfigError(
-            f"{dive_path}/{dive.info.vehicle_file}: acfr-stereo-pose needs the stereo rig (key stereo)"
-        )
-    track, source = read_track(dive_path, options.source)
-    t = dive.images.t_s
-    inside = (t >= track.t_s[0]) & (t <= track.t_s[-1])
-    if not inside.any():
-        raise InsufficientDataError(f"{dive_path}: no stereo pair inside the {source} trajectory's time span")
-    at = track.interpolate(t[inside])
-    T_bc = T_body_cam(rig)
-    R_nc = at.R_ned_body @ T_bc[:3, :3]
-    p_c = at.p_ned_m + at.R_ned_body @ T_bc[:3, 3]
+    cams = camera_track(dive_path, options.source, "acfr-stereo-pose")
+    dive, source, inside, R_nc, p_c = cams.dive, cams.source, cams.inside, cams.R_ned_cam, cams.p_ned_cam_m
+    t, rig = dive.images.t_s, dive.vehicle.stereo
     z_ang, y_ang, x_ang = rot2euler(R_nc)  # R_nc = Rz(z) Ry(y) Rx(x)
     lat, lon, _ = ned2geodetic(p_c, dive.info.origin)
     lat, lon = np.degrees(np.reshape(lat, -1)), np.degrees(np.reshape(lon, -1))

@@ -24,31 +24,17 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from auvnav.dive import read_dive
 from auvnav.errors import ConfigError, InsufficientDataError
 from auvnav.frames import ned2geodetic
-from auvnav.io.tracks import read_track
+from auvnav.io.tracks import camera_track
 from auvnav.streams import write_table
 
 
 def export_priors(dive_path: Path, out: Path, options: Any) -> dict[str, Any]:
     """Write the camera position priors CSV."""
-    from auvnav.vision.camera import T_body_cam
-
-    dive = read_dive(dive_path)
-    if dive.images is None or len(dive.images) == 0:
-        raise InsufficientDataError(f"{dive_path}/images/index.csv: colmap-priors needs the stereo pairs")
-    rig = dive.vehicle.stereo
-    if rig is None:
-        raise ConfigError(
-            f"{dive_path}/{dive.info.vehicle_file}: colmap-priors needs the stereo rig (key stereo)"
-        )
-    track, source = read_track(dive_path, options.source)
-    t = dive.images.t_s
-    inside = (t >= track.t_s[0]) & (t <= track.t_s[-1])
-    if not inside.any():
-        raise InsufficientDataError(f"{dive_path}: no stereo pair inside the {source} trajectory's time span")
-    at = track.interpolate(t[inside])
+    cams = camera_track(dive_path, options.source, "colmap-priors")
+    dive, source, inside, at = cams.dive, cams.source, cams.inside, cams.at
+    t, rig = dive.images.t_s, dive.vehicle.stereo
     if at.sigma_ned_m is not None:
         sigma = at.sigma_ned_m
         sigma_source = f"the {source} trajectory's uncertainty"
@@ -60,9 +46,7 @@ def export_priors(dive_path: Path, out: Path, options: Any) -> dict[str, Any]:
             f"the {source} trajectory has no uncertainty: give --sigma-m (the accuracy to write), or export "
             "from the filter or SLAM (--source filter|slam)"
         )
-    T_bc = T_body_cam(rig)
-    R_nc = at.R_ned_body @ T_bc[:3, :3]
-    left = at.p_ned_m + at.R_ned_body @ T_bc[:3, 3]
+    R_nc, left = cams.R_ned_cam, cams.p_ned_cam_m
     centre_right_in_left = -rig.R_right_left.T @ rig.t_right_left_m
     right = left + R_nc @ centre_right_in_left
     rows = []
