@@ -26,6 +26,8 @@ import sys
 import time
 from pathlib import Path
 
+from treeusage import descendants
+
 AUVNAV = str(Path(sys.executable).with_name("auvnav"))
 PRODUCT_SUFFIXES = (".csv", ".tum", ".g2o", ".yaml")
 
@@ -36,24 +38,6 @@ def products(dive: Path) -> dict[str, bytes]:
         rel = path.relative_to(dive / "products")
         if path.is_file() and rel.parts[0] != "cache" and path.suffix in PRODUCT_SUFFIXES:
             out[str(rel)] = path.read_bytes()
-    return out
-
-
-def tree(pid: int) -> list[int]:
-    """``pid`` and all its descendants now (from /proc)."""
-    children: dict[int, list[int]] = {}
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            except (OSError, IndexError, ValueError):
-                continue
-            children.setdefault(ppid, []).append(int(entry.name))
-    out, todo = [], [pid]
-    while todo:
-        p = todo.pop()
-        out.append(p)
-        todo += children.get(p, [])
     return out
 
 
@@ -128,7 +112,7 @@ def main() -> None:
             for p in (dive / "products").glob("*/stage.json")
             if json.loads(p.read_text()).get("status") in ("ran", "skipped")
         }
-        pids = tree(proc.pid)
+        pids = descendants(proc.pid)
         proc.send_signal(signal.SIGKILL)
         proc.wait()
         time.sleep(2.0)  # workers notice their caller has gone at once; give the kernel a moment

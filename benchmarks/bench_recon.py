@@ -29,11 +29,12 @@ import os
 import shutil
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 import numpy as np
+
+from treeusage import TreeUsage
 
 ROOT = Path(__file__).resolve().parents[1]
 AUVNAV = [str(Path(sys.executable).with_name("auvnav"))]
@@ -42,59 +43,6 @@ AUVNAV = [str(Path(sys.executable).with_name("auvnav"))]
 def run(args: list[str]) -> None:
     print("$", " ".join(str(a) for a in args), flush=True)
     subprocess.run([str(a) for a in args], check=True, cwd=ROOT)
-
-
-class TreeUsage:
-    """Peak summed resident set of this process and its descendants (sampled every 0.2 s), and the CPU
-    seconds they used (each process's last sample), Linux."""
-
-    def __init__(self) -> None:
-        self.peak_mib = 0.0
-        self._ticks: dict[int, int] = {}
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._sample, daemon=True)
-
-    def __enter__(self) -> TreeUsage:
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self._stop.set()
-        self._thread.join()
-
-    @staticmethod
-    def _tree() -> list[int]:
-        parents: dict[int, list[int]] = {}
-        for entry in Path("/proc").iterdir():
-            if entry.name.isdigit():
-                try:
-                    ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-                except OSError:
-                    continue
-                parents.setdefault(ppid, []).append(int(entry.name))
-        todo, tree = [os.getpid()], []
-        while todo:
-            pid = todo.pop()
-            tree.append(pid)
-            todo += parents.get(pid, [])
-        return tree
-
-    @property
-    def cpu_s(self) -> float:
-        return sum(self._ticks.values()) / os.sysconf("SC_CLK_TCK")
-
-    def _sample(self) -> None:
-        page_mib = os.sysconf("SC_PAGE_SIZE") / 2**20
-        while not self._stop.wait(0.2):
-            total = 0.0
-            for pid in self._tree():
-                try:
-                    total += int(Path(f"/proc/{pid}/statm").read_text().split()[1]) * page_mib
-                    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-                except OSError:
-                    continue
-                self._ticks[pid] = max(self._ticks.get(pid, 0), int(fields[11]) + int(fields[12]))
-            self.peak_mib = max(self.peak_mib, total)
 
 
 def make_dive(work: Path) -> Path:
@@ -152,7 +100,7 @@ def reconstruct_into(
             cache_dir=cache, executor=executor, progress=progress, **({} if fusion is None else {"fusion": fusion}),
         )  # fmt: skip
     # CPU seconds of the run (this process's own before it are subtracted): throughput on free cores.
-    summary["cpu_s"] = usage.cpu_s - before_cpu
+    summary["cpu_s"] = usage.cpu_s() - before_cpu
     summary["pairs_per_cpu_s"] = summary["pairs"]["used"] / summary["cpu_s"] if summary["cpu_s"] > 0 else None
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float), encoding="utf-8")
     return summary, usage.peak_mib

@@ -28,9 +28,10 @@ import os
 import shutil
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
+
+from treeusage import TreeUsage
 
 ROOT = Path(__file__).resolve().parents[1]
 AUVNAV = [str(Path(sys.executable).with_name("auvnav"))]
@@ -120,65 +121,6 @@ def loops(dive: Path, usage: TreeUsage, *, fresh: bool, settings: object = None)
         "rejected": summary["rejected"],
         **scores,
     }
-
-
-class TreeUsage:
-    """This process and every descendant (the forkserver's pool workers are not children that
-    ``getrusage`` would see), on Linux: the peak of their summed resident sets, sampled every half
-    second, and their CPU time so far (:meth:`cpu_s`)."""
-
-    def __init__(self) -> None:
-        self.peak_mib = 0.0
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._sample, daemon=True)
-
-    def __enter__(self) -> TreeUsage:
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self._stop.set()
-        self._thread.join()
-
-    @staticmethod
-    def _tree() -> list[int]:
-        parents: dict[int, list[int]] = {}
-        for entry in Path("/proc").iterdir():
-            if entry.name.isdigit():
-                try:
-                    ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-                except OSError:
-                    continue
-                parents.setdefault(ppid, []).append(int(entry.name))
-        todo, tree = [os.getpid()], []
-        while todo:
-            pid = todo.pop()
-            tree.append(pid)
-            todo += parents.get(pid, [])
-        return tree
-
-    def cpu_s(self) -> float:
-        """User and system CPU seconds of the live processes of the tree."""
-        tick = os.sysconf("SC_CLK_TCK")
-        total = 0.0
-        for pid in self._tree():
-            try:
-                fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-            except OSError:
-                continue
-            total += (int(fields[11]) + int(fields[12])) / tick
-        return total
-
-    def _sample(self) -> None:
-        page_mib = os.sysconf("SC_PAGE_SIZE") / 2**20
-        while not self._stop.wait(0.5):
-            total = 0.0
-            for pid in self._tree():
-                try:
-                    total += int(Path(f"/proc/{pid}/statm").read_text().split()[1]) * page_mib
-                except OSError:
-                    continue
-            self.peak_mib = max(self.peak_mib, total)
 
 
 def main() -> None:
