@@ -15,7 +15,7 @@ from auvnav.errors import InsufficientDataError
 from auvnav.frames import euler2rot
 from auvnav.nav.deadreckon import dead_reckon
 from auvnav.nav.inputs import nav_inputs
-from auvnav.nav.synthetic import Motion, synthetic_dive
+from auvnav.nav.synthetic import Motion, Noise, synthetic_dive
 from auvnav.vehicle import Mount, Vehicle
 
 # Exact streams leave only the integration error: the trapezoidal rule on 0.2 s steps through smooth
@@ -107,6 +107,23 @@ def test_invalid_dvl_for_a_minute_is_bridged_and_counted(survey: Motion, caplog)
     assert "bridged 1 dropout(s)" in caplog.text and "60.2 s" in caplog.text
     dr = dead_reckon(inputs)
     np.testing.assert_allclose(dr.p_ned_m, survey.truth.p_ned_m, atol=ATOL_EXACT_M)
+
+
+def test_a_dropout_is_bridged_from_the_mean_velocity_at_its_edges(survey: Motion) -> None:
+    """One ping's noise is not held across the dropout: the bridged velocity's error is about the
+    DVL's sigma over the square root of the pings in the edge windows (25 each side), not the sigma."""
+    valid = np.ones(len(survey.truth.t_s), dtype=bool)
+    valid[100:400] = False
+    sigma = 0.01
+    errors = []
+    for seed in range(8):
+        noise = Noise(dvl_velocity_sigma_mps=sigma, heading_sigma_rad=0.0, seed=seed)
+        inputs = nav_inputs(synthetic_dive(survey, dvl_valid=valid, noise=noise))
+        v_ned = np.einsum("nij,nj->ni", inputs.R_ned_body, inputs.v_body_mps)
+        v_true = np.gradient(survey.truth.p_ned_m, survey.truth.t_s, axis=0)
+        errors.append((v_ned - v_true)[inputs.bridged, :2].mean(axis=0))
+    rms = float(np.sqrt(np.mean(np.square(errors))))
+    assert rms < 0.4 * sigma  # one ping held: about 0.7 sigma; 25 pings a side: about 0.15 sigma
 
 
 def test_missing_dvl_rows_are_filled_and_bridged(survey: Motion, caplog) -> None:

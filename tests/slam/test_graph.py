@@ -12,12 +12,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from auvnav.frames import euler2rot, rot2euler, se3, se3_inverse, wrap_angle
-from auvnav.nav.filter import FilterConfig
+from auvnav.nav.filter import FilterConfig, process_variance
 from auvnav.nav.inputs import nav_inputs
-from auvnav.nav.synthetic import Noise, legs_motion, synthetic_dive
+from auvnav.nav.synthetic import START_TIME_S, Motion, Noise, legs_motion, synthetic_dive
 from auvnav.slam.compass import COEFFICIENTS_KEY, CompassModel, heading_factor, yaw_jacobian
 from auvnav.slam.graph import UNMEASURED_SIGMA_M, dvl_odometry, loop_covariance_tangent, position_factor
 from auvnav.slam.poses import MERGE_S, build_pose_times, pose_key, pose_measurements
+from auvnav.trajectory import Trajectory
 from auvnav.vehicle import Mount, Vehicle
 from auvnav.vision.loopfile import loops_from_transforms
 
@@ -228,6 +229,11 @@ def test_odometry_noise_grows_across_a_dvl_dropout(exact_dive) -> None:
     outside = (t[1:] < motion.truth.t_s[250]) | (t[:-1] > motion.truth.t_s[550])
     var_x = cov[:, 3, 3]
     assert var_x[inside].min() > 100 * var_x[outside].max()
+    # The filter's process noise, horizontally: the same model in both (a level dive, so the body's
+    # horizontal plane is the level one).
+    Q_h, _ = process_variance(inputs, config)
+    var_h = np.diff(np.interp(t, inputs.t_s, Q_h))
+    np.testing.assert_allclose(0.5 * (var_x + cov[:, 4, 4])[inside], var_h[inside], rtol=0.05)
 
 
 def test_pose_times_add_fixes_and_fill_gaps(exact_dive) -> None:
@@ -246,3 +252,35 @@ def test_pose_times_add_fixes_and_fill_gaps(exact_dive) -> None:
     assert np.count_nonzero(np.abs(times.t_s - gps[3]) < 0.5) == 1  # merged into the image at 60 s
     assert np.diff(times.t_s).max() <= 1.5  # the gaps are filled
     assert times.t_s[0] == pytest.approx(gps[0]) and times.t_s[-1] == pytest.approx(gps[-1])
+
+
+def test_a_hovering_descent_bridges_little_horizontally() -> None:
+    """A vehicle sinking straight down at 0.3 m/s without bottom lock: the odometry's horizontal
+    variance across the dropout follows its (zero) horizontal speed, its vertical one the 3D speed
+    (the filter's model), so the GPS fixes at the surface reach the seafloor through the descent."""
+    t = START_TIME_S + np.arange(0.0, 200.0, 0.2)
+    n = len(t)
+    down = 2.0 + 0.3 * t.clip(None, START_TIME_S + 100.0) - 0.3 * START_TIME_S
+    zero = np.zeros(n)
+    v_body = np.zeros((n, 3))
+    v_body[:, 2] = np.where(t < START_TIME_S + 100.0, 0.3, 0.0)
+    truth = Trajectory(t, np.column_stack([zero, zero, down]), zero, zero, zero)
+    motion = Motion(truth, v_body, np.zeros((n, 3)))
+    valid = t > START_TIME_S + 80.0  # bottom lock for the last 20 s of the descent
+    dive = synthetic_dive(motion, dvl_valid=valid)
+    inputs = nav_inputs(dive)
+    times = np.arange(t[0] + 1.0, t[-1] - 1.0, 1.0)
+    meas = pose_measurements(inputs, times, 1.0)
+    config = FilterConfig.for_vehicle(dive.vehicle, 0.1)
+    _, cov = dvl_odometry(
+        inputs,
+        times,
+        meas.R_ned_body,
+        config,
+        yaw_increment_sigma_rad=np.full(len(times) - 1, 1e-3),
+        tilt_sigma_rad=0.01,
+    )
+    gap = times[1:] < START_TIME_S + 75.0
+    floor = config.bridge_velocity_sigma_mps**2 * inputs.dropouts.duration_s[0]  # per second
+    np.testing.assert_allclose(cov[gap, 3, 3], floor, rtol=0.05)
+    assert np.all(cov[gap, 5, 5] > 10 * floor)

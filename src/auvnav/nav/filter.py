@@ -314,7 +314,7 @@ def _epochs(t_s: FloatArray, period_s: float, fix_times: FloatArray) -> FloatArr
     return np.unique(np.concatenate([grid, fix_times, t_s[-1:]]))
 
 
-def _process_variance(inputs: NavInputs, cfg: FilterConfig) -> tuple[FloatArray, FloatArray]:
+def process_variance(inputs: NavInputs, cfg: FilterConfig) -> tuple[FloatArray, FloatArray]:
     """Cumulative process variance per horizontal axis and vertically at each sample, m^2, shape (N,).
 
     Across a dropout the horizontal error scales with the fastest horizontal speed bridged, the
@@ -404,7 +404,7 @@ def run_filter(inputs: NavInputs, start: Start, cfg: FilterConfig) -> FilterResu
     W = _weighted_displacement(inputs, C, cfg.deviation_harmonics)
     CT, LT, WT = _interp_rows(T, t, C), _interp_rows(T, t, L), _interp_rows(T, t, W)
     D_dvl, D_lever, D_weighted = np.diff(CT, axis=0), -np.diff(LT, axis=0), np.diff(WT, axis=0)
-    Q_h, Q_v = _process_variance(inputs, cfg)
+    Q_h, Q_v = process_variance(inputs, cfg)
     q_h = np.diff(np.interp(T, t, Q_h))
     q_d = np.diff(np.interp(T, t, Q_v)) + (cfg.tilt_sigma_rad * np.linalg.norm(D_dvl, axis=1)) ** 2
     q_beta = cfg.heading_bias_walk**2 * np.diff(T)

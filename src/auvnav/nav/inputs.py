@@ -53,6 +53,10 @@ GAP_PERIODS = 5.0
 #: GPS fixes closer together than this belong to one stay at the surface; further apart, they bound
 #: a sub-sea leg, seconds (GPS gives a fix a second at the surface and none below it).
 SURFACE_GAP_S = 60.0
+#: A dropout's bridged velocity starts and ends at the mean of the valid samples within this many
+#: seconds of its edges, seconds (one ping's white noise held across a 3-minute descent is half a
+#: metre).
+BRIDGE_WINDOW_S = 5.0
 
 
 class HeadingCorrection(Protocol):
@@ -285,11 +289,16 @@ def _bridge(
     """Body velocities at the samples that are not ``good``, interpolated in the level frame.
 
     The valid velocities are expressed in the level frame (forward and right along the heading, and
-    down), interpolated linearly in time across each dropout (held before the first valid sample and
-    after the last), and turned back into the body frame with the attitude of each bridged sample.
+    down); each dropout's edge velocity is their mean over the :data:`BRIDGE_WINDOW_S` of valid
+    samples next to it, interpolated linearly across the dropout (held before the first valid sample
+    and after the last), and turned back into the body frame with the attitude of each bridged sample.
     A vehicle turning through a dropout keeps its speed along its heading; pitch changes (a descent,
-    the surface) do not turn a vertical velocity into a horizontal one.
+    the surface) do not turn a vertical velocity into a horizontal one; and one ping's white noise is
+    not carried across the whole dropout.
     """
+    at = ~good
+    if not at.any():
+        return np.zeros((0, 3))
     c, s = np.cos(yaw_rad), np.sin(yaw_rad)
     v_ned = np.einsum("nij,nj->ni", R_ned_body[good], v_body_mps[good])
     level = np.column_stack(
@@ -299,8 +308,16 @@ def _bridge(
             v_ned[:, 2],
         ]
     )
-    at = ~good
-    f, r, d = (np.interp(t_s[at], t_s[good], level[:, k]) for k in range(3))
+    t_good = t_s[good]
+    # The valid samples on either side of each dropout: the window's mean at both edges.
+    edges = np.flatnonzero(np.diff(good.astype(np.int8)) != 0)
+    before = good[edges] & ~good[edges + 1]
+    anchor_t = t_s[np.where(before, edges, edges + 1)]
+    lo = np.searchsorted(t_good, np.where(before, anchor_t - BRIDGE_WINDOW_S, anchor_t), side="left")
+    hi = np.searchsorted(t_good, np.where(before, anchor_t, anchor_t + BRIDGE_WINDOW_S), side="right")
+    cum = np.concatenate([np.zeros((1, 3)), np.cumsum(level, axis=0)])
+    edge_level = (cum[hi] - cum[lo]) / (hi - lo)[:, None]
+    f, r, d = (np.interp(t_s[at], anchor_t, edge_level[:, k]) for k in range(3))
     bridged_ned = np.column_stack([c[at] * f - s[at] * r, s[at] * f + c[at] * r, d])
     return np.einsum("nji,nj->ni", R_ned_body[at], bridged_ned)
 

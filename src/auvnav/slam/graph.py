@@ -8,8 +8,10 @@ solves the graph. The factors:
   :func:`auvnav.nav.nav_inputs`: mount, lever arm and dropouts handled) expressed in the first pose's
   body frame; the rotation is the attitude change. Translation noise per axis: the DVL's white
   velocity noise, ``(sigma_v dt)^2`` per sample; across a bridged dropout of length ``T_g``
-  ``sigma_b^2 T_g dt`` per sample, ``sigma_b`` a floor plus a fraction of the speed (as the filter,
-  :class:`auvnav.nav.FilterConfig`); the scale error ``(sigma_s |d|)^2`` along the displacement; the
+  ``sigma_b^2 T_g dt`` per sample, ``sigma_b`` a floor plus a fraction of the fastest horizontal
+  speed bridged (vertically, of the fastest speed in 3D): the filter's process noise
+  (:func:`auvnav.nav.filter.process_variance`), so a vehicle hovering at the surface and through its
+  descent is held by the average of its GPS fixes, not by the last few; the scale error ``(sigma_s |d|)^2`` along the displacement; the
   tilt error ``(sigma_tilt |d|)^2`` vertically. Rotation noise: roll and pitch loose
   (:data:`ODOMETRY_TILT_FACTOR` times the inclinometer's sigma, so the inclinometer counts once,
   through its unary factors); the yaw increment comes from the compass, whose white noise is taken
@@ -61,7 +63,7 @@ from auvnav.depth.tide import TideModel
 from auvnav.dive import Dive
 from auvnav.frames import FloatArray, rot2euler, se3, wrap_angle
 from auvnav.nav.deadreckon import dead_reckon
-from auvnav.nav.filter import FilterConfig
+from auvnav.nav.filter import FilterConfig, process_variance
 from auvnav.nav.inputs import NavInputs
 from auvnav.slam.compass import COEFFICIENTS_KEY, CompassModel
 from auvnav.slam.g2o import PoseGraph
@@ -207,22 +209,14 @@ def dvl_odometry(
     d_body = np.einsum("nji,nj->ni", R_ned_body[:-1], d_ned)
     R_rel = np.swapaxes(R_ned_body[:-1], 1, 2) @ R_ned_body[1:]
 
-    # Per-sample variance of the integrated velocity (per axis): white noise and bridged dropouts.
-    dt = np.diff(inputs.t_s)
-    bridged_step = inputs.bridged[1:] | inputs.bridged[:-1]
-    drop = inputs.dropouts
-    which = np.clip(np.searchsorted(drop.start_s, inputs.t_s[:-1], side="right") - 1, 0, None)
-    gap_s = drop.duration_s[which] if drop.count else np.zeros(len(dt))
-    speed = np.linalg.norm(inputs.v_body_mps[:-1], axis=1)
-    sigma_b = config.bridge_velocity_sigma_mps + config.bridge_speed_fraction * speed
-    var_step = (config.dvl_velocity_sigma_mps * dt) ** 2 + np.where(
-        bridged_step, sigma_b**2 * gap_s * dt, 0.0
-    )
-    cum = np.concatenate([[0.0], np.cumsum(var_step)])
-    var_iso = np.diff(np.interp(t, inputs.t_s, cum))
-
+    # Variance of the integrated velocity, per horizontal axis and vertically (the filter's process
+    # noise: white noise, bridged dropouts), between consecutive poses, rotated into body k.
+    Q_h, Q_v = process_variance(inputs, config)
+    var_h = np.diff(np.interp(t, inputs.t_s, Q_h))
+    var_v = np.diff(np.interp(t, inputs.t_s, Q_v))
     n = len(t) - 1
-    cov_t = var_iso[:, None, None] * np.eye(3)
+    R0 = R_ned_body[:-1]
+    cov_t = np.einsum("nji,nj,njk->nik", R0, np.stack([var_h, var_h, var_v], -1), R0)
     cov_t += config.dvl_scale_sigma**2 * d_body[:, :, None] * d_body[:, None, :]
     cov_t[:, 2, 2] += (config.tilt_sigma_rad * np.linalg.norm(d_body, axis=1)) ** 2
     cov = np.zeros((n, 6, 6))
