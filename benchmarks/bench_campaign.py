@@ -13,12 +13,17 @@ Measured: the campaign's wall time and peak memory (in a fresh process), candida
 and kept, and ``auvnav evaluate CAMPAIGN``'s campaign section: ``inter_dive_rmse_m`` (target under
 0.02 m RMS over the overlap) and ``inter_dive_loop_precision`` (target >= 0.99).
 
-``--images``: the change detection. Two small surveys (12 m x 8 m, seeds 31 and 32) with quarter-scale
-images, each processed by the pipeline (nav, vision loop closures, SLAM with its tide, recon without
-the TSDF mesh), then the campaign; its DEM difference scored by ``evaluate``: the removed coral
-head's area and height (targets within 20%) and the largest false change (target 0.25 m^2).
+``--images``: inter-dive loops from the images, and the change detection. Two small surveys (12 m x
+8 m, seeds ``--site`` and the next: 31 and 32 by default) with quarter-scale images (the repeat's
+texture is the site's), each processed by the pipeline (nav, vision loop closures, SLAM with its tide,
+recon without the TSDF mesh), then the campaign, its inter-dive candidates verified by the loop
+stage's registration of the two dives' images (:class:`auvnav.campaign.ImageRegistration`;
+``--truth-registration``: from the truth instead); scored by ``evaluate``: inter-dive RMSE and loop
+precision as above, the removed coral head's area and height (targets within 20%) and the largest
+false change (target 0.25 m^2).
 
-Run: ``.venv/bin/python benchmarks/bench_campaign.py [--out DIR] [--small] [--false 0.2] [--images]``
+Run: ``.venv/bin/python benchmarks/bench_campaign.py [--out DIR] [--small] [--false 0.2] [--images
+[--site 31] [--truth-registration]]``
 """
 
 from __future__ import annotations
@@ -62,20 +67,22 @@ def _campaign_task(dives: list[str], out: str, false: float) -> dict[str, Any]:
     }
 
 
-def images(out: Path, false: float) -> None:
+def images(out: Path, false: float, site: int, truth_registration: bool) -> None:
     """Two small imaged surveys processed in full, then the campaign and its DEM difference."""
+    from auvnav.campaign import ImageRegistration
     from auvnav.cli import main as cli
+    from auvnav.executor import make_executor
     from auvnav.sim.camera import render_dive_images
 
     geometry = {"width_m": 12.0, "height_m": 8.0, "lead_in_m": 5.0}
     first, repeat = out / "dive1", out / "dive2"
     start = time.perf_counter()
-    run_scenario("survey", first, seed=31, geometry=geometry, overwrite=True)
-    render_dive_images(first, scale=0.25, seed=31)
-    change = simulate_repeat(first, repeat, seed=32, days_later=3.0, geometry=geometry, overwrite=True)[
+    run_scenario("survey", first, seed=site, geometry=geometry, overwrite=True)
+    render_dive_images(first, scale=0.25, seed=site)
+    change = simulate_repeat(first, repeat, seed=site + 1, days_later=3.0, geometry=geometry, overwrite=True)[
         "change"
     ]
-    render_dive_images(repeat, scale=0.25, seed=32)
+    render_dive_images(repeat, scale=0.25, seed=site + 1)
     print(f"simulated and rendered in {time.perf_counter() - start:.0f} s; removed {change['removed']}")
     settings = out / "settings.yaml"
     settings.write_text("recon: {voxel_m: 0.0}\n", encoding="utf-8")
@@ -94,11 +101,17 @@ def images(out: Path, false: float) -> None:
         code = cli([*args, *only])
         print(f"{dive.name}: processed in {time.perf_counter() - start:.0f} s (exit {code})")
     start = time.perf_counter()
-    summary = run_campaign(
-        [first, repeat], out / "campaign", TruthRegistration([first, repeat], false_fraction=false, seed=1),
-        overwrite=True, registration_name="truth",
-    )  # fmt: skip
-    print(f"campaign in {time.perf_counter() - start:.0f} s: {summary['changes']}")
+    with make_executor() as executor:
+        register: Any = (
+            TruthRegistration([first, repeat], false_fraction=false, seed=1)
+            if truth_registration
+            else ImageRegistration([first, repeat], executor=executor)
+        )
+        summary = run_campaign(
+            [first, repeat], out / "campaign", register, overwrite=True,
+            registration_name="truth" if truth_registration else "images",
+        )  # fmt: skip
+    print(f"campaign in {time.perf_counter() - start:.0f} s: {summary['inter_dive']}, {summary['changes']}")
     scores = evaluate_dive(out / "campaign")["campaign"]
     print("scores:", json.dumps(scores))
 
@@ -111,9 +124,15 @@ def main() -> None:
         "--false", type=float, default=0.2, help="Fraction of verified candidates that are false."
     )
     parser.add_argument("--images", action="store_true", help="The change detection on small imaged surveys.")
+    parser.add_argument(
+        "--site", type=int, default=31, help="With --images: the first dive's seed (the site)."
+    )
+    parser.add_argument(
+        "--truth-registration", action="store_true", help="With --images: inter-dive loops from the truth."
+    )
     args = parser.parse_args()
     if args.images:
-        images(args.out, args.false)
+        images(args.out, args.false, args.site, args.truth_registration)
         return
     logging.basicConfig(level=logging.WARNING)
     args.out.mkdir(parents=True, exist_ok=True)

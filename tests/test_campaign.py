@@ -4,6 +4,7 @@ truth, scored by ``auvnav evaluate CAMPAIGN``."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -12,6 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
+from scipy.spatial import cKDTree
 
 from auvnav.cli import main
 from auvnav.pipeline import run_stage
@@ -84,13 +86,16 @@ def test_campaign_products_and_scores(
 def test_campaign_refuses_bad_input(
     dives: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """One dive, a dive twice, a folder that is no dive: known errors, no traceback, nothing written."""
-    a, _ = dives
-    for args in ([a], [a, a], [a, tmp_path]):
+    """One dive, a dive twice, a folder that is no dive, dives without images and no --truth-loops:
+    known errors, no traceback, nothing written."""
+    a, b = dives
+    for args in ([a], [a, a], [a, tmp_path], [a, b]):
         capsys.readouterr()
-        assert main(["campaign", *map(str, args), "--out", str(tmp_path / "c"), "--truth-loops", "-q"]) == 1
+        truth = ["--truth-loops"] if args != [a, b] else []
+        assert main(["campaign", *map(str, args), "--out", str(tmp_path / "c"), *truth, "-q"]) == 1
         err = capsys.readouterr().err
         assert "auvnav: error:" in err and "Traceback" not in err
+    assert "give --truth-loops" in err
     assert not (tmp_path / "c").exists()
 
 
@@ -100,9 +105,12 @@ def test_dem_difference_finds_the_removed_coral_head(
     """DEMs made from each dive's true seafloor where its SLAM placed it (5 cm cells, elevation = -depth,
     as products/recon/dem.tif) around the removed mound: the campaign's DEM difference finds it, its
     area and height as the truth's, and nothing else."""
-    from auvnav.dive import read_dive_info
+    import rasterio
+
+    from auvnav.dive import read_dive_info, vehicle_file_name
     from auvnav.raster import MapGrid, write_geotiff
-    from auvnav.sim.camera import seafloor_from_truth
+    from auvnav.sim.camera import default_stereo_rig, seafloor_from_truth
+    from auvnav.vehicle import read_vehicle, write_vehicle
 
     removed = yaml.safe_load((dives[1] / CHANGE_FILE).read_text(encoding="utf-8"))["removed"][0]
     copies = []
@@ -123,12 +131,19 @@ def test_dem_difference_finds_the_removed_coral_head(
         path = copy / "products/recon/dem.tif"
         path.parent.mkdir(parents=True, exist_ok=True)
         write_geotiff(path, dem, grid, nodata=np.nan, overviews=False)
+        # A stereo rig: the cells each dive's images saw (support) can be counted.
+        vehicle = copy / (vehicle_file_name(copy) or "vehicle.yaml")
+        write_vehicle(dataclasses.replace(read_vehicle(vehicle), stereo=default_stereo_rig()), vehicle)
         copies.append(copy)
     # The SLAM summaries name their loop and tide files in the original folders: still there.
     out = tmp_path / "campaign"
     assert main(["campaign", *map(str, copies), "--out", str(out), "--truth-loops", "-q"]) == 0
     regions = pd.read_csv(out / "changes.csv")
     assert len(regions) >= 1 and (out / "dem_difference.tif").is_file()
+    with rasterio.open(out / "dem_difference.tif") as src:
+        diff = src.read(1)
+    # Both DEMs cover the whole square, the dives' images not: cells outside them are no difference.
+    assert 0.05 < np.isnan(diff).mean() < 0.9
     capsys.readouterr()
     assert main(["evaluate", str(out), "--json"]) == 0
     scores = json.loads(capsys.readouterr().out)["campaign"]
@@ -136,3 +151,85 @@ def test_dem_difference_finds_the_removed_coral_head(
     assert scores["change_area_m2"] == pytest.approx(scores["change_area_true_m2"], rel=0.2)
     assert scores["change_height_m"] == pytest.approx(removed["height_m"], rel=0.2)
     assert scores["false_change_max_area_m2"] <= 0.25
+
+
+def test_simulate_repeat_command(
+    dives: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``auvnav simulate survey --repeat-of DIVE``: the same site's seafloor, the repeat's own seed and
+    tide; the first dive's seed, or a folder that is no simulated dive, refused."""
+    a, _ = dives
+    geometry = ["--width-m", "14", "--height-m", "8", "--lead-in-m", "5", "--no-images", "-q"]
+    out = tmp_path / "repeat"
+    args = ["simulate", "survey", "--repeat-of", str(a), "--out", str(out), *geometry]
+    assert main([*args, "--seed", "23", "--keep-coral", "--days-later", "1.5"]) == 0
+    truth = yaml.safe_load((out / "truth/truth.yaml").read_text(encoding="utf-8"))
+    assert truth["seafloor"]["seed"] == 21 and truth["seed"] == 23
+    assert truth["site"]["start_time"].startswith("2009-10-16T13")  # 1.5 days after the default start
+    change = yaml.safe_load((out / CHANGE_FILE).read_text(encoding="utf-8"))
+    assert change["site_seed"] == 21 and "removed" not in change
+    for bad in (["--seed", "21"], ["--seed", "24", "--repeat-of", str(tmp_path)]):
+        capsys.readouterr()
+        assert main([*args, *bad, "--overwrite"]) == 1
+        err = capsys.readouterr().err
+        assert "auvnav: error:" in err and "Traceback" not in err
+
+
+def test_images_of_two_dives_register(dives: tuple[Path, Path], tmp_path: Path) -> None:
+    """The repeat survey's images show the site's seafloor (its texture seeded by the site, not the
+    dive), so the loop stage's registration (:class:`auvnav.campaign.ImageRegistration`) verifies
+    pairs of images of the two dives with their true relative pose; pairs that do not overlap, their
+    prior saying they do, do not verify."""
+    from auvnav.campaign import ImageRegistration
+    from auvnav.dive import ImageIndex, vehicle_file_name
+    from auvnav.frames import se3, se3_inverse
+    from auvnav.sim.camera import (
+        body_poses,
+        default_stereo_rig,
+        render_dive_images,
+        render_images,
+        scale_camera_rig,
+        seafloor_from_truth,
+    )
+    from auvnav.sim.texture import SeafloorTexture
+    from auvnav.streams import read_stream
+    from auvnav.vehicle import read_vehicle, write_vehicle
+
+    a, b = (tmp_path / d.name for d in dives)
+    for d, copy in zip(dives, (a, b), strict=True):
+        shutil.copytree(d, copy, ignore=shutil.ignore_patterns("products", "images"))
+    render_dive_images(b, scale=0.25, rate_hz=0.04, seed=22)
+    assert yaml.safe_load((b / "truth/imaging.yaml").read_text(encoding="utf-8"))["texture"]["seed"] == 21
+    # The first dive's images where it passed nearest to the repeat's.
+    index_b = read_stream(ImageIndex, b / "images/index.csv", "images/index.csv")
+    T_b = body_poses(read_trajectory(b / "truth/trajectory.csv").interpolate(index_b.t_s))
+    truth_a = read_trajectory(a / "truth/trajectory.csv")
+    dist, nearest = cKDTree(truth_a.p_ned_m).query(T_b[:, :3, 3])
+    times, rows_a = np.unique(truth_a.t_s[nearest], return_inverse=True)
+    rig = scale_camera_rig(default_stereo_rig(), 0.25)
+    render_images(
+        truth_a, seafloor_from_truth(a / "truth/truth.yaml"), rig, times, a / "images",
+        texture=SeafloorTexture(seed=21), seed=21,
+    )  # fmt: skip
+    vehicle = a / (vehicle_file_name(a) or "vehicle.yaml")
+    write_vehicle(dataclasses.replace(read_vehicle(vehicle), stereo=rig), vehicle)
+    T_a = body_poses(truth_a.interpolate(times))
+    rows_b = np.arange(len(index_b.t_s))
+    near = dist < 0.3
+    assert near.sum() >= 10
+    # Overlapping pairs, their prior 25 cm off; pairs 3 m or more apart, their prior an overlap.
+    ra, rb = rows_a[near], rows_b[near]
+    T_true = se3_inverse(T_a[ra]) @ T_b[rb]
+    prior = T_true.copy()
+    prior[:, :2, 3] += [0.2, -0.15]
+    far_b = rows_b[np.argsort(-np.linalg.norm(T_b[:, :2, 3] - T_a[rows_a[0], :2, 3], axis=1))[:5]]
+    assert np.all(np.linalg.norm(T_b[far_b, :2, 3] - T_a[rows_a[0], :2, 3], axis=1) > 3.0)
+    ra = np.concatenate([ra, np.full(5, rows_a[0])])
+    rb = np.concatenate([rb, far_b])
+    prior = np.concatenate([prior, np.broadcast_to(se3(np.eye(3), np.zeros(3)), (5, 4, 4))])
+    ok, T, C = ImageRegistration([a, b])(0, ra, 1, rb, prior, np.full(len(ra), 0.3))
+    n = int(near.sum())
+    assert ok[:n].mean() >= 0.6 and not ok[n:].any()
+    error = np.linalg.norm(T[:n][ok[:n], :3, 3] - T_true[ok[:n], :3, 3], axis=1)
+    assert error.max() < 0.03
+    assert np.all(np.isfinite(C[ok]))

@@ -19,8 +19,12 @@ trajectories and their uncertainty:
    against its ``max_per_image`` nearest images of B so corrected, within the new search radius.
 
 A candidate is verified by the registration given to :func:`run_campaign` (a callable: images of two
-dives, the relative pose and covariance; the images' registration of the vision front end, or, for
-simulated dives without images, :class:`auvnav.sim.repeat.TruthRegistration`, a testing aid).
+dives and their prior relative pose and sigma from the trajectories above, the seeds' correction
+applied to the dense candidates -> verified, relative pose, covariance):
+:class:`ImageRegistration`, the loop stage's own verification of the two dives' images (their
+feature caches, :func:`auvnav.vision.registration.register` with the prior, the loop stage's gates on
+the displacement and heading against the prior), or, for simulated dives without images and chosen
+explicitly (``--truth-loops``), :class:`auvnav.sim.repeat.TruthRegistration`, a testing aid.
 
 **Selection**: the verified inter-dive loop closures go through pairwise consistency against both
 dives' odometry (:func:`auvnav.slam.pcm.select_pairwise`), the dives' own loop closures through their
@@ -40,8 +44,10 @@ Products (in ``CAMPAIGN/``, written into a temporary folder and renamed into pla
   chi-square at the joint solution);
 - ``dem_difference.tif`` and ``changes.csv`` where two dives have a reconstruction
   (``products/recon/dem.tif``): the later DEM less the earlier on the earlier's grid, each DEM shifted
-  by how far the joint solution moved its dive, less the median difference (a tide datum error);
-  regions where the difference exceeds ``change_threshold_m`` (rises and falls apart; cells within
+  by how far the joint solution moved its dive, less the median difference (a tide datum error),
+  over the cells that at least ``change_min_support`` stereo pairs of each dive saw (their footprints
+  on the floor at the DVL's altitude, :func:`image_support`; not checked for a dive without a stereo
+  calibration); regions where the difference exceeds ``change_threshold_m`` (rises and falls apart; cells within
   ``change_merge_m`` of each other joined: a change seen through the gaps between lines is one) over at least
   ``change_min_area_m2``, with the peak change and its position;
 - ``summary.json``.
@@ -65,10 +71,10 @@ from scipy.spatial import cKDTree
 
 from auvnav import products as P
 from auvnav.config import dump_yaml, load_yaml
-from auvnav.dive import Dive, read_dive
+from auvnav.dive import Dive, image_files, read_dive
 from auvnav.errors import AuvnavError, DiveFormatError, InsufficientDataError, OutputExistsError, Problem
 from auvnav.footprint import footprints_on_plane
-from auvnav.frames import FloatArray, GeodeticOrigin, geodetic2ned, rot2euler, se3
+from auvnav.frames import FloatArray, GeodeticOrigin, geodetic2ned, rot2euler, se3, se3_inverse
 from auvnav.raster import map2ned, ned2map
 from auvnav.streams import write_json
 from auvnav.trajectory import Trajectory, read_trajectory, write_trajectory
@@ -85,9 +91,13 @@ FORMAT = "auvnav-campaign/1"
 #: calibration (the default rig's footprint is about 1 m along track at 2 m altitude).
 DEFAULT_REACH_M = 0.8
 
-#: The registration of candidate pairs: (dive a, its image rows, dive b, its image rows) ->
-#: (verified mask, T_a_b (N, 4, 4), covariance of x, y, z, roll, pitch, yaw (N, 6, 6), ...).
-Registration = Callable[[int, NDArray[np.int64], int, NDArray[np.int64]], tuple[Any, ...]]
+#: The registration of candidate pairs: (dive a, its image rows, dive b, its image rows, the prior
+#: body pose of b in a (N, 4, 4) from the dives' trajectories in the common frame, its horizontal
+#: 1-sigma (N,), metres) -> (verified mask, T_a_b (N, 4, 4), covariance of x, y, z, roll, pitch, yaw
+#: (N, 6, 6), ...).
+Registration = Callable[
+    [int, NDArray[np.int64], int, NDArray[np.int64], FloatArray, FloatArray], tuple[Any, ...]
+]
 
 
 @dataclass(frozen=True)
@@ -103,6 +113,7 @@ class CampaignSettings:
     change_threshold_m: float = 0.15
     change_min_area_m2: float = 0.25
     change_merge_m: float = 0.5
+    change_min_support: int = 2
 
 
 def origin_offset(origin: GeodeticOrigin, common: GeodeticOrigin) -> FloatArray:
@@ -175,13 +186,224 @@ class InterDiveLoops:
 
 
 def _verify(
-    register: Registration, a: int, b: int, ra: NDArray[np.int64], rb: NDArray[np.int64]
+    register: Registration,
+    a: int,
+    b: int,
+    ra: NDArray[np.int64],
+    rb: NDArray[np.int64],
+    prior: FloatArray,
+    sigma: FloatArray,
 ) -> tuple[NDArray[np.int64], NDArray[np.int64], FloatArray, FloatArray]:
     if len(ra) == 0:
         return ra, rb, np.zeros((0, 4, 4)), np.zeros((0, 6, 6))
-    out = register(a, ra, b, rb)
+    out = register(a, ra, b, rb, prior, sigma)
     ok, T, C = np.asarray(out[0], dtype=bool), np.asarray(out[1]), np.asarray(out[2])
     return ra[ok], rb[ok], T[ok], C[ok]
+
+
+@dataclass(frozen=True)
+class _RegisterContext:
+    """What each worker needs to register inter-dive pairs (picklable)."""
+
+    rigs: tuple[Any, ...]  # StereoRig per dive
+    rects: tuple[Any, ...]  # Rectification per dive
+    features: tuple[Any, ...]  # FeatureSettings per dive (its loop stage's: its feature cache)
+    cache_dirs: tuple[Path, ...]  # the loop stage's feature cache of each dive
+    settings: Any  # LoopSettings of the first dive of the pair (registration, gates)
+    vocabulary: Any  # Vocabulary or None
+
+
+#: One pair to register: (dive a, left and right image of a, dive b, left and right image of b, prior
+#: camera pose of b in a, its lateral 1-sigma).
+_RegisterItem = tuple[int, str, str, int, str, str, FloatArray, float]
+
+
+def _register_task(
+    ctx: _RegisterContext, items: list[_RegisterItem]
+) -> list[tuple[bool, FloatArray, FloatArray]]:
+    """The loop stage's verification of each pair (:func:`auvnav.vision.registration.register` on
+    the pairs' cached stereo features, the pose and covariance moved into the body frames)."""
+    from auvnav.vision.camera import T_body_cam
+    from auvnav.vision.loops import body_pose_and_covariance
+    from auvnav.vision.registration import register
+    from auvnav.vision.stereo import pair_features
+
+    loaded: dict[tuple[int, str], Any] = {}
+
+    def features(d: int, left: str, right: str) -> Any:
+        if (d, left) not in loaded:
+            loaded[(d, left)] = pair_features(
+                Path(left), Path(right), ctx.rigs[d], ctx.rects[d], ctx.features[d], ctx.cache_dirs[d]
+            )
+        return loaded[(d, left)]
+
+    out = []
+    for a, la, ra, b, lb, rb, T_prior, sigma in items:
+        fa, fb = features(a, la, ra), features(b, lb, rb)
+        if fa is None or fb is None or len(fa) == 0 or len(fb) == 0:
+            out.append((False, np.eye(4), np.full((6, 6), np.nan)))
+            continue
+        reg = register(fa, fb, ctx.settings.registration, prior=(T_prior, sigma), vocabulary=ctx.vocabulary)
+        if not reg.accepted:
+            out.append((False, np.eye(4), np.full((6, 6), np.nan)))
+            continue
+        T_bc = T_body_cam(ctx.rigs[a])
+        # The two dives' rigs may differ: T_ba_bb = T_bc(a) T_ca_cb T_bc(b)^-1, taken with a's mount
+        # for the covariance (a vehicle's mount moves by millimetres between dives).
+        p6, c6 = body_pose_and_covariance(reg.T_a_b, reg.cov_xi, T_bc)
+        T = T_bc @ reg.T_a_b @ se3_inverse(T_body_cam(ctx.rigs[b]))
+        out.append((True, T, c6 if np.all(np.isfinite(p6)) else np.full((6, 6), np.nan)))
+    return out
+
+
+def _loop_settings(dive: Path) -> Any:
+    """The loop stage's settings of a dive, from its ``products/vision/summary.json`` (defaults when
+    it has none), so that its feature cache serves the campaign."""
+    from auvnav.vision.candidates import CandidateSettings
+    from auvnav.vision.features import FeatureSettings
+    from auvnav.vision.loops import LoopSettings
+    from auvnav.vision.registration import RegistrationSettings
+
+    path = P.VISION_SUMMARY.path(dive)
+    if not path.is_file():
+        return LoopSettings()
+    try:
+        s = dict(json.loads(path.read_text(encoding="utf-8"))["settings"])
+        return LoopSettings(
+            features=FeatureSettings(**s.pop("features")),
+            registration=RegistrationSettings(**s.pop("registration")),
+            candidates=CandidateSettings(**s.pop("candidates")),
+            **s,
+        )
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        log.warning("%s: loop settings unreadable (%s); the defaults are used", path, err)
+        return LoopSettings()
+
+
+class ImageRegistration:
+    """Inter-dive registration of images: the loop stage's own verification (its feature cache, its
+    registration, its gates) applied to pairs of images of two dives.
+
+    A pair is verified when :func:`auvnav.vision.registration.register` accepts it (with the prior
+    pose of the candidate, as the loop stage gives its own) and when it agrees with the prior as the
+    loop stage's do (:func:`auvnav.vision.loops.measurement_sigma`): the horizontal displacement
+    within the ``prior_gate_probability`` chi-square (2 dof) quantile of the prior's sigma, the
+    relative heading within ``max_heading_disagreement_rad`` of the prior's. The settings are the
+    first dive's loop stage's (``products/vision/summary.json``).
+    """
+
+    def __init__(self, dives: list[Path], executor: Any = None) -> None:
+        from auvnav.executor import SerialExecutor
+        from auvnav.vision.camera import rectification
+        from auvnav.vision.features import build_vocabulary
+
+        self.dives = [Path(d) for d in dives]
+        self.executor = executor or SerialExecutor()
+        rigs, rects, features, caches, self.images = [], [], [], [], []
+        settings = [_loop_settings(d) for d in self.dives]
+        for d, path in enumerate(self.dives):
+            dive = read_dive(path)
+            if dive.images is None or len(dive.images) == 0:
+                raise InsufficientDataError(
+                    f"{path}: no images (images/index.csv): give --truth-loops for simulated dives without images"
+                )
+            if dive.vehicle.stereo is None:
+                raise InsufficientDataError(
+                    f"{path}: the vehicle has no stereo calibration (simulated without images: give --truth-loops)"
+                )
+            if not image_files(path, dive.images):
+                raise InsufficientDataError(
+                    f"{path}: none of the images that images/index.csv lists is in images/ "
+                    "(simulated without images: give --truth-loops)"
+                )
+            rigs.append(dive.vehicle.stereo)
+            rects.append(rectification(dive.vehicle.stereo))
+            features.append(settings[d].features)
+            caches.append(P.cache_dir(path, "vision") / "features")
+            self.images.append(
+                (
+                    [str(path / "images" / f) for f in dive.images.left],
+                    [str(path / "images" / f) for f in dive.images.right],
+                )
+            )
+        self.settings = settings
+        self._base = (tuple(rigs), tuple(rects), tuple(features), tuple(caches))
+        self._vocabulary: dict[int, Any] = {}
+        self._build_vocabulary = build_vocabulary
+
+    def _context(self, a: int) -> _RegisterContext:
+        words = self.settings[a].vocabulary_words
+        if a not in self._vocabulary:
+            self._vocabulary[a] = self._learn_vocabulary(a, words) if words > 1 else None
+        return _RegisterContext(*self._base, settings=self.settings[a], vocabulary=self._vocabulary[a])
+
+    def _learn_vocabulary(self, d: int, words: int, sample: int = 20_000) -> Any:
+        """A vocabulary learnt, as the loop stage learns its own, from descriptors of 50 pairs of dive
+        ``d`` (None when too few)."""
+        from auvnav.vision.stereo import pair_features
+
+        rigs, rects, features, caches = self._base
+        left, right = self.images[d]
+        rng = np.random.default_rng(0)
+        picked = range(0, len(left), max(1, len(left) // 50))
+        per = max(1, sample // len(picked))
+        desc = []
+        for k in picked:
+            f = pair_features(Path(left[k]), Path(right[k]), rigs[d], rects[d], features[d], caches[d])
+            if f is not None and len(f):
+                desc.append(f.descriptors[rng.choice(len(f), min(per, len(f)), replace=False)])
+        data = np.concatenate(desc) if desc else np.zeros((0, 128), np.uint8)
+        return self._build_vocabulary(data, words) if len(data) >= 20 * words else None
+
+    def __call__(
+        self,
+        a: int,
+        rows_a: NDArray[np.int64],
+        b: int,
+        rows_b: NDArray[np.int64],
+        prior_T_a_b: FloatArray,
+        sigma_m: FloatArray,
+    ) -> tuple[NDArray[np.bool_], FloatArray, FloatArray]:
+        from scipy.stats import chi2
+
+        from auvnav.executor import chunks
+        from auvnav.frames import angle_diff
+        from auvnav.vision.camera import T_body_cam
+        from auvnav.vision.loops import measurement_sigma
+
+        ctx = self._context(a)
+        T_bc_a, T_bc_b = T_body_cam(ctx.rigs[a]), T_body_cam(ctx.rigs[b])
+        T_cam = se3_inverse(T_bc_a)[None] @ prior_T_a_b @ T_bc_b[None]  # camera b in camera a
+        # The camera pose's lateral sigma: the positions' plus the heading error turning it (as the
+        # loop stage's prior: 0.1 rad).
+        sigma_cam = np.hypot(sigma_m, 0.1 * np.linalg.norm(T_cam[:, :2, 3], axis=1))
+        (la, ra_), (lb, rb_) = self.images[a], self.images[b]
+        items = [
+            (a, la[i], ra_[i], b, lb[j], rb_[j], T_cam[n], float(sigma_cam[n]))
+            for n, (i, j) in enumerate(zip(rows_a.tolist(), rows_b.tolist(), strict=True))
+        ]
+        results: list[tuple[bool, FloatArray, FloatArray]] = []
+        for part in self.executor.map(_register_task, ctx, chunks(items, 16)):
+            results.extend(part)
+        ok = np.array([r[0] for r in results], dtype=bool)
+        T = np.stack([r[1] for r in results]) if results else np.zeros((0, 4, 4))
+        C = np.stack([r[2] for r in results]) if results else np.zeros((0, 6, 6))
+        # Agreement with the prior, as the loop stage's: the displacement of b from a (in a's body
+        # frame, level to within the pitch and roll) and the relative heading.
+        s = ctx.settings
+        err = T[:, :2, 3] - prior_T_a_b[:, :2, 3]
+        sigma = np.hypot(sigma_m, measurement_sigma(T[:, :2, 3]))
+        gate = float(chi2.ppf(s.prior_gate_probability, 2))
+        agree = np.sum(err**2, axis=1) / sigma**2 <= gate
+        yaw = np.arctan2(T[:, 1, 0], T[:, 0, 0])
+        yaw_prior = np.arctan2(prior_T_a_b[:, 1, 0], prior_T_a_b[:, 0, 0])
+        agree &= np.abs(angle_diff(yaw, yaw_prior)) <= s.max_heading_disagreement_rad
+        verified = ok & agree
+        log.info(
+            "dives %d x %d: %d pairs registered, %d accepted, %d of them agree with the prior",
+            a, b, len(items), int(ok.sum()), int(verified.sum()),
+        )  # fmt: skip
+        return verified, T, C
 
 
 def inter_dive_candidates(
@@ -205,13 +427,14 @@ def inter_dive_candidates(
     ra = np.concatenate(ra_list) if ra_list else np.zeros(0, np.int64)
     rb = np.concatenate(rb_list) if rb_list else np.zeros(0, np.int64)
     tested = len(ra)
-    sa, sb, sT, sC = _verify(register, a, b, ra, rb)
+    TA = _poses(A.trajectory)
+    TB = _poses(B.trajectory)
+    prior = se3_inverse(TA[ra]) @ TB[rb]
+    sa, sb, sT, sC = _verify(register, a, b, ra, rb, prior, np.hypot(A.sigma_h[ra], B.sigma_h[rb]))
     log.info("%s x %s: %d seed candidates, %d verified", A.name, B.name, tested, len(sa))
     if len(sa) == 0:
         return InterDiveLoops(a, b, sa, sb, sT, sC, tested, 0)
     # Where B lies against A, by the seeds: B's position predicted from A's through the relative pose.
-    TA = _poses(A.trajectory)
-    TB = _poses(B.trajectory)
     predicted = (TA[sa] @ sT)[:, :2, 3]
     delta = predicted - TB[sb, :2, 3]
     order = np.argsort(sa, kind="stable")
@@ -235,7 +458,9 @@ def inter_dive_candidates(
     seen = set(zip(sa.tolist(), sb.tolist(), strict=True))
     new = np.array([(x, y) not in seen for x, y in zip(da.tolist(), db.tolist(), strict=True)], dtype=bool)
     da, db = da[new].astype(np.int64), db[new]
-    ta, tb, tT, tC = _verify(register, a, b, da, db)
+    TB_corrected = TB[db].copy()
+    TB_corrected[:, :2, 3] += local[da]
+    ta, tb, tT, tC = _verify(register, a, b, da, db, se3_inverse(TA[da]) @ TB_corrected, sigma[da])
     log.info("%s x %s: %d dense candidates, %d verified", A.name, B.name, len(da), len(ta))
     return InterDiveLoops(
         a,
@@ -548,6 +773,34 @@ def dem_differences(
     return dem_difference(data[have[0]], data[have[1]], per_dive[have[0]], per_dive[have[1]], out, settings)
 
 
+def image_support(
+    d: _DiveData, move_ne_m: FloatArray, ne_m: FloatArray, cell_m: float = 0.05
+) -> FloatArray | None:
+    """How many of a dive's stereo pairs saw each point ``ne_m`` (..., 2; common frame, north and
+    east): their stereo footprints from the dive's SLAM poses moved by ``move_ne_m``, on the floor
+    below the DVL (:mod:`auvnav.coverage.analysis`, 2 m when it logs no altitude), counted on
+    ``cell_m`` cells (:func:`auvnav.coverage.grid.count_polygons`); None when the vehicle has no
+    stereo calibration (a DEM made otherwise)."""
+    from auvnav.coverage.analysis import floor_below_dvl, image_altitude_m, image_footprints
+    from auvnav.coverage.grid import count_polygons
+    from auvnav.raster import MapGrid
+
+    rig = d.dive.vehicle.stereo
+    if rig is None:
+        return None
+    poses = replace(d.trajectory, p_ned_m=d.trajectory.p_ned_m + np.array([*move_ne_m[:2], 0.0]))
+    altitude = image_altitude_m(d.dive, poses.t_s, fallback_m=2.0)
+    floor = floor_below_dvl(poses, altitude, d.dive.vehicle.dvl.lever_arm_body_m)
+    polygons, ok = image_footprints(poses, floor, rig, "stereo")
+    grid = MapGrid.covering(polygons[ok], d.dive.info.origin, cell_m, margin_m=cell_m)
+    count = count_polygons(polygons[ok], grid)
+    rc = grid.cells_of_map(ned2map(ne_m, d.dive.info.origin))
+    inside = np.all((rc >= 0) & (rc < (grid.height, grid.width)), axis=-1)
+    out = np.zeros(ne_m.shape[:-1])
+    out[inside] = count[rc[inside][:, 0], rc[inside][:, 1]]
+    return out
+
+
 def dem_difference(
     A: _DiveData,
     B: _DiveData,
@@ -595,8 +848,24 @@ def dem_difference(
     if nodata_a is not None:
         dem_a[dem_a == nodata_a] = np.nan
     diff = dem_b - dem_a
-    diff -= np.nanmedian(diff)  # the tide's datum error left in either DEM
     cell_area = abs(transform_a.a * transform_a.e)
+    if settings.change_min_support > 0:
+        # Cells both dives saw from enough stereo pairs: a cell at the edge of a dive's coverage
+        # (one oblique view, often a lone line of the lead-in or a turn) declares no change.
+        # Counted on blocks of about 5 cm of cells (the DEM's cells may be a centimetre).
+        step = max(1, round(0.05 / math.sqrt(cell_area)))
+        h, w = diff.shape
+        rows_, cols_ = np.mgrid[0:h:step, 0:w:step].astype(float)
+        x, y = shifted(transform_a, info_a, A) @ (cols_.ravel() + 0.5 * step, rows_.ravel() + 0.5 * step)
+        ne = map2ned(np.column_stack([x, y]), common)[:, :2].reshape(*rows_.shape, 2)
+        for dd, info in ((A, info_a), (B, info_b)):
+            support = image_support(dd, np.array(info["moved_median_m"][:2]), ne)
+            if support is None:
+                log.warning("%s: no stereo calibration: its DEM's cells are not checked for support", dd.path)
+                continue
+            seen = np.repeat(np.repeat(support >= settings.change_min_support, step, 0), step, 1)
+            diff[~seen[:h, :w]] = np.nan
+    diff -= np.nanmedian(diff)  # the tide's datum error left in either DEM
     # Changed cells; a region joins those within change_merge_m of each other (a change seen through the
     # gaps between survey lines is one change), its area counting the changed cells only.
     # Rises and falls are labelled apart.
@@ -645,4 +914,9 @@ def dem_difference(
     }
     with rasterio.open(out / DEM_DIFFERENCE_FILE, "w", **profile) as dst:
         dst.write(diff.astype(np.float32), 1)
-    return {"status": "done", "dives": [A.name, B.name], "changes": len(rows), "cell_m": math.sqrt(cell_area)}
+    return {
+        "status": "done",
+        "dives": [info_a["name"], info_b["name"]],
+        "changes": len(rows),
+        "cell_m": math.sqrt(cell_area),
+    }

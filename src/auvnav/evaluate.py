@@ -173,17 +173,37 @@ def _slam(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, An
 
 def _online(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, Any] | None:
     """The SLAM estimate as the vehicle knew it at each moment (``slam/online.csv``, ``--online``) and
-    the time per pose of its updates (``slam/summary.json``)."""
+    the time per pose of its updates (``slam/summary.json``).
+
+    The online error is each image pose's estimate as known when the iSAM2 update that added it
+    finished, scored as any trajectory (``ate_aligned_rmse_m``: one yaw and translation alignment for
+    the whole dive, as the batch's); ``ratio_to_smoothed`` is it over the ``slam`` section's (the same
+    run's smoothed estimate after the last update, the batch solution's within a millimetre), and
+    ``aligned_rmse_by_quarter_m`` the same aligned errors' RMS over each quarter of the dive's time
+    (the online error early in a dive, before loop closures or a deviation are observable)."""
     path = P.SLAM_ONLINE.path(dive_path)
     if not path.is_file():
         return None
-    score = score_trajectory(truth, read_trajectory(path), distance_m, str(path))
+    online = read_trajectory(path)
+    score = score_trajectory(truth, online, distance_m, str(path))
     scores: dict[str, Any] = {"ate_aligned_rmse_m": score.ate_aligned_rmse_m, "ate_rmse_m": score.ate_rmse_m}
+    smoothed = P.SLAM_TRAJECTORY.path(dive_path)
+    if smoothed.is_file():
+        batch = score_trajectory(truth, read_trajectory(smoothed), distance_m, str(smoothed))
+        scores["ratio_to_smoothed"] = score.ate_aligned_rmse_m / batch.ate_aligned_rmse_m
+    est = online.select((online.t_s >= truth.t_s[0]) & (online.t_s <= truth.t_s[-1]))
+    ref = truth.interpolate(est.t_s).p_ned_m
+    yaw, t = align_yaw_translation(est.p_ned_m, ref)
+    error = np.linalg.norm(est.p_ned_m @ rot_z(yaw).T + t - ref, axis=1)
+    quarter = np.minimum((4 * (est.t_s - est.t_s[0]) / max(est.t_s[-1] - est.t_s[0], 1e-9)).astype(int), 3)
+    scores["aligned_rmse_by_quarter_m"] = [
+        _rms_norm(error[quarter == q]) if np.any(quarter == q) else math.nan for q in range(4)
+    ]
     summary = P.SLAM_SUMMARY.path(dive_path)
-    online = json.loads(summary.read_text(encoding="utf-8")).get("online") if summary.is_file() else None
-    if online:
+    record = json.loads(summary.read_text(encoding="utf-8")).get("online") if summary.is_file() else None
+    if record:
         for key in ("update_median_ms", "update_p95_ms", "update_max_ms", "loop_delay_median_s"):
-            scores[key] = online[key]
+            scores[key] = record[key]
     return scores
 
 
@@ -496,6 +516,15 @@ def evaluate_dive(dive_path: Path, *, compass_correction: Path | None = None) ->
     return result
 
 
+def _cell(value: Any) -> str:
+    """A score as shown: floats to 4 significant digits, lists of floats as ``[a b ...]``."""
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    if isinstance(value, list) and value and all(isinstance(v, float) for v in value):
+        return "[" + " ".join(f"{v:.4g}" for v in value) + "]"
+    return str(value)
+
+
 def format_scores(result: dict[str, Any]) -> str:
     """A short human-readable table of :func:`evaluate_dive`'s result."""
     lines = [f"distance travelled (truth): {result['distance_m']:.1f} m"]
@@ -503,9 +532,6 @@ def format_scores(result: dict[str, Any]) -> str:
     if not sections:
         lines.append("no products to score")
     for name, scores in sections:
-        cells = ", ".join(
-            f"{key} {value:.4g}" if isinstance(value, float) else f"{key} {value}"
-            for key, value in scores.items()
-        )
+        cells = ", ".join(f"{key} {_cell(value)}" for key, value in scores.items())
         lines.append(f"{name:8s} {cells}")
     return "\n".join(lines)

@@ -129,3 +129,50 @@ def test_online_replay_writes_the_estimate_known_at_each_moment(dive: Path, onli
     assert set(scores["online"]) >= {"ate_aligned_rmse_m", "update_median_ms", "update_p95_ms"}
     assert scores["online"]["ate_aligned_rmse_m"] < 0.15
     assert scores["online"]["ate_aligned_rmse_m"] >= scores["slam"]["ate_aligned_rmse_m"] * 0.9
+
+
+def test_online_schedule_adds_loop_closures_when_found_and_decided(dive: Path) -> None:
+    from auvnav.slam.online import schedule
+    from auvnav.slam.result import sensor_graph
+
+    d = read_dive(dive)
+    loops = read_loops(dive / "truth" / "loops.csv", n_poses=len(d.images.t_s))
+    sg = sensor_graph(d, d.images.t_s, loops=loops, options=SlamOptions(marginal_every=0))
+    plan = schedule(sg, 10, 2.0)
+    is_loop = np.array([kind == "loop" for kind in sg.kinds])
+    t = sg.times.t_s
+    # A loop closure joins the update after its decision plus the latency; a sensor factor its pose's.
+    decided = t[np.minimum(plan.selection.decided_at, len(t) - 1)] + 2.0
+    assert np.all(t[plan.lasts[plan.update_of[is_loop]]] >= np.minimum(decided, t[-1]))
+    assert np.all(plan.lasts[plan.update_of[~is_loop]] >= np.maximum(sg.last_pose[~is_loop], 0))
+    assert np.array_equal(plan.skip[is_loop], ~plan.selection.keep)
+    known = [len(plan.known_by(u)) for u in range(len(plan.firsts))]
+    assert np.all(np.diff(known) >= 0) and known[-1] == np.count_nonzero(~plan.skip)
+
+
+def test_online_with_an_earlier_correction_beats_the_raw_compass(
+    dive: Path, online: dict, tmp_path: Path
+) -> None:
+    """A correction exported by SLAM (here the dive's own, estimated in the graph) given to the online
+    replay: the compass is then trusted and the estimate known at each moment is closer to the truth."""
+    import shutil
+
+    copy = tmp_path / "dive"
+    shutil.copytree(dive, copy, ignore=shutil.ignore_patterns("products"))
+    loops = ["--loops", str(copy / "truth" / "loops.csv"), "--marginal-every", "0", "-q", "--json"]
+    assert main(["slam", str(copy), "--estimate-compass", *loops]) == 0
+    correction = tmp_path / "correction.yaml"
+    shutil.copyfile(copy / "products" / "slam" / "correction.yaml", correction)
+    args = ["slam", str(copy), "--online", "--loop-latency-s", "2", "--compass-correction", str(correction)]
+    assert main([*args, *loops]) == 0
+    summary = json.loads((copy / "products" / "slam" / "summary.json").read_text(encoding="utf-8"))
+    assert summary["compass"]["mode"] == "corrected" and summary["solver"] == "isam2-online"
+    evaluated = evaluate_dive(copy)
+    scores, raw = evaluated["online"], online["scores"]["online"]
+    assert scores["ate_aligned_rmse_m"] < 0.8 * raw["ate_aligned_rmse_m"]
+    # The ratio is to the same run's smoothed estimate; the quarters split the same aligned errors.
+    slam_rmse = evaluated["slam"]["ate_aligned_rmse_m"]
+    assert scores["ratio_to_smoothed"] == pytest.approx(scores["ate_aligned_rmse_m"] / slam_rmse)
+    quarters = np.array(scores["aligned_rmse_by_quarter_m"])
+    assert quarters.shape == (4,) and np.all(np.isfinite(quarters))
+    assert min(quarters) <= scores["ate_aligned_rmse_m"] <= max(quarters)

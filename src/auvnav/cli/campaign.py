@@ -7,8 +7,18 @@ from typing import Annotated, Any
 
 import typer
 
-from auvnav.cli.common import JsonOpt, OverwriteOpt, QuietOpt, VerboseOpt, app, emit, setup_logging
-from auvnav.errors import AuvnavError
+from auvnav.cli.common import (
+    JsonOpt,
+    OverwriteOpt,
+    QuietOpt,
+    SchedulerOpt,
+    VerboseOpt,
+    WorkersOpt,
+    app,
+    emit,
+    setup_logging,
+)
+from auvnav.errors import ConfigError
 
 
 def format_campaign(summary: dict[str, Any]) -> str:
@@ -62,23 +72,29 @@ def campaign(
         int, typer.Option("--seed", help="With --truth-loops: seed of the noise and the false matches.")
     ] = 0,
     overwrite: OverwriteOpt = False,
+    workers: WorkersOpt = None,
+    scheduler: SchedulerOpt = None,
     as_json: JsonOpt = False,
     verbose: VerboseOpt = 0,
     quiet: QuietOpt = False,
 ) -> None:
-    """Several dives in one frame: inter-dive loop closures, one joint graph, per-dive trajectories in
-    the common frame, the DEM difference where two dives have a reconstruction."""
-    from auvnav.campaign import run_campaign
+    """Several dives in one frame: inter-dive loop closures (the dives' images registered as the loop
+    stage registers its own), one joint graph, per-dive trajectories in the common frame, the DEM
+    difference where two dives have a reconstruction."""
+    from auvnav.campaign import ImageRegistration, run_campaign
+    from auvnav.executor import make_executor
 
     setup_logging(verbose, quiet)
-    if truth_loops:
-        from auvnav.sim.repeat import TruthRegistration
+    if (false_loops or seed) and not truth_loops:
+        raise ConfigError("--false-loops and --seed apply to --truth-loops only")
+    with make_executor(scheduler, workers) as executor:
+        if truth_loops:
+            from auvnav.sim.repeat import TruthRegistration
 
-        register: Any = TruthRegistration(list(dives), false_fraction=false_loops, seed=seed)
-        name = f"truth (simulator; {false_loops:g} false)"
-    else:
-        raise AuvnavError(
-            "inter-dive registration of images is not implemented yet: for simulated dives give --truth-loops"
-        )
-    summary = run_campaign(list(dives), out, register, overwrite=overwrite, registration_name=name)
+            register: Any = TruthRegistration(list(dives), false_fraction=false_loops, seed=seed)
+            name = f"truth (simulator; {false_loops:g} false)"
+        else:
+            register = ImageRegistration(list(dives), executor=executor)
+            name = "images"
+        summary = run_campaign(list(dives), out, register, overwrite=overwrite, registration_name=name)
     emit(summary, format_campaign(summary), as_json=as_json)

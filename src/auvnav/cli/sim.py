@@ -181,6 +181,22 @@ def simulate(
         float,
         typer.Option("--false-loops", min=0.0, max=0.99, help="Fraction of truth loops that are false."),
     ] = 0.0,
+    repeat_of: Annotated[
+        Path | None,
+        typer.Option(
+            "--repeat-of",
+            metavar="DIVE",
+            help="A repeat survey: fly SCENARIO (give the first dive's scenario and geometry options) over "
+            "the seafloor of the simulated DIVE days later, with its own --seed (noise, GPS fixes, DVL "
+            "errors), the tallest coral head of DIVE's imaged area removed (truth/change.yaml).",
+        ),
+    ] = None,
+    days_later: Annotated[
+        float, typer.Option("--days-later", min=0.0, help="With --repeat-of: days after DIVE (another tide).")
+    ] = 3.0,
+    keep_coral: Annotated[
+        bool, typer.Option("--keep-coral", help="With --repeat-of: remove no coral head (no change).")
+    ] = False,
     overwrite: OverwriteOpt = False,
     workers: WorkersOpt = None,
     scheduler: SchedulerOpt = None,
@@ -194,6 +210,11 @@ def simulate(
     from auvnav.sim.run import run_scenario
 
     setup_logging(verbose, quiet)
+    simulate_fn: Any = run_scenario
+    if repeat_of is not None:
+        simulate_fn = _repeat_simulator(repeat_of, seed, days_later, keep_coral)
+    elif days_later != 3.0 or keep_coral:
+        raise typer.BadParameter("--days-later and --keep-coral apply to --repeat-of only")
     geometry = {
         "headings": headings,
         "leg_m": leg_m,
@@ -222,7 +243,7 @@ def simulate(
         "image_rate_hz": image_rate_hz,
     }
     if as_json or quiet:
-        summary = run_scenario(scenario, out, **options)
+        summary = simulate_fn(scenario, out, **options)
     else:
         columns = (
             TextColumn("simulating"),
@@ -237,7 +258,7 @@ def simulate(
                 done = min(elapsed_s / expected_s, 1.0)
                 bar.update(task, completed=done, description=f"{elapsed_s / 3600:.2f} h of vehicle time")
 
-            summary = run_scenario(scenario, out, progress=progress, **options)
+            summary = simulate_fn(scenario, out, progress=progress, **options)
     if images:
         summary["images"] = _render_images(
             out, image_scale, image_rate_hz, seed, as_json or quiet, workers, scheduler, water.value
@@ -252,7 +273,54 @@ def simulate(
     if truth_loops:
         n = summary["truth_loops"]
         human += f"\ntruth loops: {n['loops']} ({n['consecutive']} consecutive), {n['false']} false"
+    if repeat_of is not None:
+        removed = summary["change"].get("removed", [])
+        human += (
+            f"\nrepeat of {repeat_of} (site seed {summary['change']['site_seed']}), {days_later:g} days later"
+            + (
+                "; no coral head removed"
+                if not removed
+                else "; coral head removed at north {north_m:.1f} m, east {east_m:.1f} m: {height_m:.2f} m high, "
+                "{area_m2:.2f} m^2 (truth/change.yaml)".format(**removed[0])
+            )
+        )
     emit(summary, human, as_json=as_json)
+
+
+def _repeat_simulator(first: Path, seed: int, days_later: float, keep_coral: bool) -> Any:
+    """``run_scenario`` for a repeat survey of the simulated dive ``first``
+    (:func:`auvnav.sim.repeat.simulate_repeat`)."""
+    from auvnav.config import load_yaml
+    from auvnav.errors import ConfigError
+
+    truth = first / "truth" / "truth.yaml"
+    if not truth.is_file():
+        raise ConfigError(f"{truth}: not found (--repeat-of needs a simulated dive)")
+    data, problems = load_yaml(truth, str(truth))
+    if problems or not isinstance(data, dict) or "seafloor" not in data:
+        raise ConfigError(f"{truth}: not a simulated dive's truth (no seafloor)")
+    if int(data.get("seed", -1)) == seed:
+        raise ConfigError(f"--seed {seed} is {first}'s own: give the repeat survey another --seed")
+    if not keep_coral and not (first / "images" / "index.csv").is_file():
+        raise ConfigError(
+            f"{first}: no images/index.csv (the coral head removed is one it imaged): give --keep-coral"
+        )
+
+    def run(scenario: str, out: Path, **options: Any) -> dict[str, Any]:
+        from auvnav.sim.repeat import simulate_repeat
+
+        options.pop("seed")
+        return simulate_repeat(
+            first,
+            out,
+            seed=seed,
+            days_later=days_later,
+            remove_coral=not keep_coral,
+            scenario=scenario,
+            **options,
+        )
+
+    return run
 
 
 def _render_images(

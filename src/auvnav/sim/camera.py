@@ -924,7 +924,9 @@ def render_dive_images(
     rig : StereoRig, optional
         Default :func:`default_stereo_rig`.
     seed : int
-        Texture and sensor noise.
+        Sensor noise. The texture is the site's: seeded by the seafloor's seed of ``truth/truth.yaml``
+        (the dive's own seed, or for a repeat survey the site's), so that dives of one site see the
+        same seafloor in the same (site) coordinates.
     water : {"clear", "coastal", "turbid"}
         The water (:func:`water_type`), unless ``lighting`` is given.
     lighting : Lighting, optional
@@ -945,7 +947,7 @@ def render_dive_images(
     rig = scale_camera_rig(rig or default_stereo_rig(), scale)
     times = select_image_times(truth, seafloor, rate_hz=rate_hz)
     lighting = lighting or Lighting(water=water_type(water))
-    texture = SeafloorTexture(seed=seed)
+    texture = SeafloorTexture(seed=int(getattr(seafloor, "seed", seed)))  # the site's
     index = render_images(
         truth,
         seafloor,

@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from auvnav.dive import ImageIndex, read_dive, vehicle_file_name
+from auvnav.errors import InsufficientDataError
 from auvnav.footprint import footprints, polygon_overlap
 from auvnav.frames import FloatArray, GeodeticOrigin, euler2rot, geodetic2ned, se3, se3_inverse
 from auvnav.sim.camera import body_poses, default_stereo_rig, seafloor_from_truth
@@ -72,7 +73,12 @@ def simulate_repeat(
     """Fly ``scenario`` again over the site of dive ``first`` (module docstring); ``options`` as
     :func:`auvnav.sim.run.run_scenario`'s (``geometry``, ``truth_loops``, ``overwrite`` ...)."""
     site = yaml.safe_load((first / "truth" / "truth.yaml").read_text(encoding="utf-8"))["seafloor"]["seed"]
-    mound = coral_to_remove(first) if remove_coral else None
+    try:
+        mound = coral_to_remove(first) if remove_coral else None
+    except ValueError as err:
+        raise InsufficientDataError(
+            f"{first}: {err}: no coral head to remove (keep it, or survey more)"
+        ) from None
     summary = run_scenario(
         scenario,
         out,
@@ -142,9 +148,16 @@ class TruthRegistration:
         return self._truth[d]
 
     def __call__(
-        self, a: int, rows_a: NDArray[np.int64], b: int, rows_b: NDArray[np.int64]
+        self,
+        a: int,
+        rows_a: NDArray[np.int64],
+        b: int,
+        rows_b: NDArray[np.int64],
+        prior_T_a_b: FloatArray | None = None,
+        sigma_m: FloatArray | None = None,
     ) -> tuple[NDArray[np.bool_], FloatArray, FloatArray, NDArray[np.bool_]]:
-        """Verify candidate pairs (image ``rows_a`` of dive ``a`` with ``rows_b`` of dive ``b``).
+        """Verify candidate pairs (image ``rows_a`` of dive ``a`` with ``rows_b`` of dive ``b``; the
+        prior and its sigma, which the truth does not need, are ignored).
 
         Returns
         -------

@@ -12,7 +12,10 @@ Products (DESIGN section 6), in ``DIVE/products/slam/``:
 - ``summary.json``: :meth:`~auvnav.slam.result.SlamResult.summary`;
 - ``online.csv`` with ``--online``: each image pose as the vehicle knew it when the iSAM2 update
   that added it finished (:mod:`auvnav.slam.online`), columns as ``trajectory.csv`` without sigmas;
-  ``trajectory.csv`` is then the smoother's estimate after the last update;
+  ``trajectory.csv`` is then the smoother's estimate after the last update. A vehicle runs it with
+  the correction an earlier check dive exported (``compass_correction``): with the raw compass the
+  deviation's change through each turn is unobservable until the vehicle comes back, and the online
+  error is several times the batch's;
 - ``correction.yaml`` with ``estimate_compass``: the estimated deviation as a correction file
   (``auvnav-compass-correction/1``, :func:`auvnav.compass.correction.write_correction`) with the
   coefficients' marginal covariance. Earlier releases called it ``compass_correction.yaml``.
@@ -57,7 +60,9 @@ class SlamSettings:
         minimum=1,
     )
     online: bool = setting(
-        False, "Replay the dive in time order as the vehicle would (iSAM2); writes products/slam/online.csv."
+        False,
+        "Replay the dive in time order as the vehicle would (iSAM2); writes products/slam/online.csv. "
+        "Give it the --compass-correction an earlier check dive exported, as a vehicle would.",
     )
     loop_latency_s: float | None = setting(
         None,
