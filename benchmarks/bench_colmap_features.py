@@ -23,7 +23,8 @@ matches per pair, descriptor matches and registration inliers), pose errors agai
 contrast-stretched): what of the difference is the preprocessing.
 
 Usage: ``.venv/bin/python benchmarks/bench_colmap_features.py --dive DIVE [--pairs 30]
-[--colmap-input raw|corrected]``.
+[--colmap-input raw|corrected] [--pairs-file PAIRS.json]``; ``--pairs-file``: given pairs (a JSON list
+of ``[i, j]``), e.g. the true loops the loop stage missed.
 """
 
 from __future__ import annotations
@@ -79,6 +80,12 @@ def main() -> None:
     parser.add_argument("--min-gap", type=int, default=10)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
+        "--pairs-file",
+        type=Path,
+        help="the pairs to compare instead of drawn ones: a JSON list of [i, j] rows of images/index.csv "
+        "(e.g. the true loops the loop stage missed)",
+    )
+    parser.add_argument(
         "--colmap-input",
         choices=("raw", "corrected"),
         default="raw",
@@ -97,7 +104,10 @@ def main() -> None:
     truth = read_trajectory(dive / "truth" / "trajectory.csv").interpolate(index.t_s)
     T_body_left = se3(rig.mount.R_body_sensor, rig.mount.lever_arm_body_m)
     T_left = se3(truth.R_ned_body, truth.p_ned_m) @ T_body_left
-    pairs = choose_pairs(T_left, args.pairs, args.max_offset_m, args.min_gap, args.seed)
+    if args.pairs_file is not None:
+        pairs = [(int(i), int(j)) for i, j in json.loads(args.pairs_file.read_text(encoding="utf-8"))]
+    else:
+        pairs = choose_pairs(T_left, args.pairs, args.max_offset_m, args.min_gap, args.seed)
     images = index_file.parent
 
     # COLMAP's conventions: a pixel's centre at +0.5; OPENCV model fx, fy, cx, cy, k1, k2, p1, p2.

@@ -181,3 +181,53 @@ def test_candidates_find_the_crossings_of_a_grid() -> None:
     assert len(i) > 0 and np.all(p >= settings.p_min) and np.all(j - i > 1)
     crossing = (np.linalg.norm(centre[i], axis=1) < 1.5) & (np.linalg.norm(centre[j], axis=1) < 1.5)
     assert np.any(crossing)
+
+
+def test_guided_matching_resolves_repetitive_texture_inside_the_prior_window() -> None:
+    """Every descriptor repeats five times across the scene (ripples): global matching's ratio test
+    rejects almost all of them; the prior-guided search finds them, and only the right ones."""
+    from auvnav.vision.registration import guided_matches
+
+    rng = np.random.default_rng(5)
+    n = 300
+    T = se3(euler2rot(0.05, 0.01, 0.0), np.array([0.4, -0.1, 0.02]))
+    p_b = np.column_stack([rng.uniform(-1, 1, n), rng.uniform(-0.75, 0.75, n), rng.uniform(2.4, 2.6, n)])
+    p_a = p_b @ T[:3, :3].T + T[:3, 3]
+    patterns = rng.integers(0, 16, (n // 5, 128))
+    desc = patterns[np.arange(n) % (n // 5)]
+    noisy = lambda: np.clip(desc + rng.integers(-1, 2, desc.shape), 0, 15).astype(np.uint8)  # noqa: E731
+    cov = np.broadcast_to(np.diag([1e-3, 1e-3, 1e-2]) ** 2, (n, 3, 3)).copy()
+    a = StereoFeatures(np.zeros((n, 4)), p_a, cov, noisy())
+    b = StereoFeatures(np.zeros((n, 4)), p_b, cov.copy(), noisy())
+    ia, _ = match_descriptors(a.descriptors, b.descriptors, ratio=0.8)
+    assert len(ia) < 0.1 * n
+    prior = T.copy()
+    prior[:2, 3] += [0.03, -0.02]  # the navigation's error, within its 1-sigma of 3 cm
+    ga, gb = guided_matches(a, b, prior, 3.7 * 0.03 + 0.1, 0.85)
+    assert len(ga) > 0.6 * n
+    assert np.mean(ga == gb) > 0.97
+    reg = register(a, b, RegistrationSettings(), prior=(prior, 0.03))
+    assert reg.accepted and np.linalg.norm(reg.T_a_b[:3, 3] - T[:3, 3]) < 0.01
+    # a prior far outside its own uncertainty (a false candidate): the window holds no true partner
+    wrong = T.copy()
+    wrong[:2, 3] += [0.9, 0.6]
+    assert not register(a, b, RegistrationSettings(), prior=(wrong, 0.03)).accepted
+
+
+def test_a_registration_tilted_away_from_the_prior_is_rejected() -> None:
+    """The prior's roll and pitch come from the attitude sensors: a fit tilted 3 degrees from them is
+    a wrong one (matches slid along ripple crests), whatever its inliers say."""
+    from auvnav.vision.registration import relative_tilt
+
+    assert relative_tilt(np.eye(3), expm_so3(np.radians([0.3, -0.4, 5.0]))) == pytest.approx(
+        np.radians(0.5), rel=1e-3
+    )
+    rng = np.random.default_rng(7)
+    T = se3(euler2rot(0.2, 0.01, 0.0), np.array([0.2, 0.1, 0.0]))
+    a, b = _point_sets(rng, T, 150)
+    assert register(a, b, prior=(T, 0.05)).accepted
+    tilted = T.copy()
+    tilted[:3, :3] = expm_so3(np.radians([3.0, 0.0, 0.0])) @ T[:3, :3]
+    reg = register(a, b, prior=(tilted, 0.05))
+    assert not reg.accepted and reg.reason.startswith("tilt disagrees with the prior")
+    assert register(a, b, RegistrationSettings(max_tilt_disagreement_rad=0.0), prior=(tilted, 0.05)).accepted

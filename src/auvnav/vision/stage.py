@@ -69,11 +69,21 @@ class VisionSettings:
         maximum=64,
     )
 
+    guided_window: float = setting(
+        3.7,
+        "Prior-guided matching: match a feature only against those the navigation prior puts within this "
+        "many sigmas of it (plus 10 cm); 0: match every feature against every other.",
+        minimum=0.0,
+        maximum=100.0,
+    )
+
     def loop_settings(self) -> LoopSettings:
         from auvnav.vision.features import FeatureSettings
         from auvnav.vision.loops import LoopSettings
+        from auvnav.vision.registration import RegistrationSettings
 
         return LoopSettings(
+            registration=RegistrationSettings(guided_sigmas=self.guided_window),
             features=FeatureSettings(
                 scale=self.feature_scale,
                 max_features=self.features,
@@ -81,7 +91,7 @@ class VisionSettings:
                 contrast_target_dn=self.contrast_target,
                 spread_cells=self.feature_spread,
                 edge_reject_px=self.edge_reject,
-            )
+            ),
         )
 
 
