@@ -295,7 +295,6 @@ class ImageRegistration:
     def __init__(self, dives: list[Path], executor: Any = None) -> None:
         from auvnav.executor import SerialExecutor
         from auvnav.vision.camera import rectification
-        from auvnav.vision.features import build_vocabulary
 
         self.dives = [Path(d) for d in dives]
         self.executor = executor or SerialExecutor()
@@ -329,7 +328,6 @@ class ImageRegistration:
         self.settings = settings
         self._base = (tuple(rigs), tuple(rects), tuple(features), tuple(caches))
         self._vocabulary: dict[int, Any] = {}
-        self._build_vocabulary = build_vocabulary
 
     def _context(self, a: int) -> _RegisterContext:
         words = self.settings[a].vocabulary_words
@@ -337,23 +335,20 @@ class ImageRegistration:
             self._vocabulary[a] = self._learn_vocabulary(a, words) if words > 1 else None
         return _RegisterContext(*self._base, settings=self.settings[a], vocabulary=self._vocabulary[a])
 
-    def _learn_vocabulary(self, d: int, words: int, sample: int = 20_000) -> Any:
-        """A vocabulary learnt, as the loop stage learns its own, from descriptors of 50 pairs of dive
-        ``d`` (None when too few)."""
+    def _learn_vocabulary(self, d: int, words: int) -> Any:
+        """A vocabulary learnt from dive ``d``'s pairs as the loop stage learns its own
+        (:func:`auvnav.vision.loops.learn_vocabulary`)."""
+        from auvnav.vision.loops import learn_vocabulary
         from auvnav.vision.stereo import pair_features
 
         rigs, rects, features, caches = self._base
         left, right = self.images[d]
-        rng = np.random.default_rng(0)
-        picked = range(0, len(left), max(1, len(left) // 50))
-        per = max(1, sample // len(picked))
-        desc = []
-        for k in picked:
+
+        def descriptors(k: int) -> Any:
             f = pair_features(Path(left[k]), Path(right[k]), rigs[d], rects[d], features[d], caches[d])
-            if f is not None and len(f):
-                desc.append(f.descriptors[rng.choice(len(f), min(per, len(f)), replace=False)])
-        data = np.concatenate(desc) if desc else np.zeros((0, 128), np.uint8)
-        return self._build_vocabulary(data, words) if len(data) >= 20 * words else None
+            return None if f is None else f.descriptors
+
+        return learn_vocabulary(descriptors, len(left), words)
 
     def __call__(
         self,

@@ -290,16 +290,21 @@ def _from_cache(i: int, j: int, r: np.void) -> Verification:
     )
 
 
-def _vocabulary(files: list[str], words: int, sample: int = 20_000) -> Vocabulary | None:
-    """A vocabulary learnt from about ``sample`` descriptors drawn evenly from the dive's pairs (None
-    when the dive has too few descriptors to split)."""
+def learn_vocabulary(
+    descriptors: Callable[[int], NDArray[np.uint8] | None], n: int, words: int, sample: int = 20_000
+) -> Vocabulary | None:
+    """A vocabulary learnt from about ``sample`` descriptors drawn evenly from ``n`` stereo pairs
+    (``descriptors(k)``: pair k's, None when it has none); None when there are too few to split."""
     rng = np.random.default_rng(0)
-    picked = files[:: max(1, len(files) // 50)]
-    per_file = max(1, sample // len(picked))
+    picked = range(0, n, max(1, n // 50))
+    per_pair = max(1, sample // len(picked))
     desc = []
-    for path in picked:
-        d = _load(path).descriptors
-        desc.append(d[rng.choice(len(d), min(per_file, len(d)), replace=False)])
+    for k in picked:
+        d = descriptors(k)
+        if d is not None and len(d):
+            desc.append(d[rng.choice(len(d), min(per_pair, len(d)), replace=False)])
+    if not desc:
+        return None
     data = np.concatenate(desc)
     return build_vocabulary(data, words) if len(data) >= 20 * words else None
 
@@ -463,7 +468,11 @@ def find_loops(
     if len(usable) < 2:
         raise InsufficientDataError("images: fewer than two readable stereo pairs")
     if settings.vocabulary_words > 1:
-        ctx = replace(ctx, vocabulary=_vocabulary([files[k] for k in usable], settings.vocabulary_words))
+        picked = [files[k] for k in usable]
+        vocabulary = learn_vocabulary(
+            lambda k: _load(picked[k]).descriptors, len(picked), settings.vocabulary_words
+        )
+        ctx = replace(ctx, vocabulary=vocabulary)
     verified = _read_verified(verify_dir)
     salt = _verification_salt(settings, ctx.vocabulary)
     pri = prior.interpolate(t[usable])
