@@ -504,6 +504,7 @@ class _Tsdf:
         self.trunc = s.truncation_voxels * v
         self.max_depth = max_range_m + self.trunc
         self.geom = geom
+        self.frames = 0  # depth maps integrated
         if s.tsdf == "blockgrid":
             o3c = o3d.core
             block_res = 16
@@ -529,7 +530,12 @@ class _Tsdf:
             )
 
     def integrate(self, depth: NDArray[np.float32], image: NDArray[np.uint8], T_ned_rect: FloatArray) -> None:
-        """One depth map (rectified left camera, metres, 0: none) with its image, placed at ``T_ned_rect``."""
+        """One depth map (rectified left camera, metres, 0: none) with its image, placed at ``T_ned_rect``;
+        nothing when no pixel has a depth within range (a sliver of a pair in the tile, eroded away:
+        Open3D refuses a frame that touches no block)."""
+        if not np.any((depth > 0) & (depth <= self.max_depth)):
+            return
+        self.frames += 1
         o3d = self.o3d
         R, t = T_ned_rect[:3, :3], T_ned_rect[:3, 3] - self.origin
         E = np.eye(4)
@@ -563,6 +569,9 @@ class _Tsdf:
     ) -> tuple[FloatArray, NDArray[np.uint8], NDArray[np.int32]]:
         """The mesh cut to the tile (triangles whose centroid lies in it), vertices in ENU (east, north,
         up) about the dive's origin, metres; colours (k, 3) uint8; faces (f, 3) int32."""
+        empty = (np.zeros((0, 3)), np.zeros((0, 3), np.uint8), np.zeros((0, 3), np.int32))
+        if self.frames == 0:
+            return empty
         if self.s.tsdf == "blockgrid":
             mesh = self.grid.extract_triangle_mesh(weight_threshold=0.5).to_legacy()  # one view has weight 1
         else:
@@ -570,7 +579,6 @@ class _Tsdf:
         vertices = np.asarray(mesh.vertices, dtype=float)
         faces = np.asarray(mesh.triangles, dtype=np.int64)
         colours = np.asarray(mesh.vertex_colors, dtype=float)
-        empty = (np.zeros((0, 3)), np.zeros((0, 3), np.uint8), np.zeros((0, 3), np.int32))
         if len(faces) == 0:
             return empty
         ned = vertices + self.origin
