@@ -291,13 +291,39 @@ def compand_descriptors(descriptors: NDArray[np.uint8]) -> NDArray[np.uint8]:
     return np.minimum(np.rint(15.0 * np.sqrt(d / SIFT_COMPONENT_MAX)), 15.0).astype(np.uint8)
 
 
+def squared_distances(desc_a: NDArray[np.uint8], desc_b: NDArray[np.uint8]) -> NDArray[np.float32]:
+    """Every squared distance between two sets of descriptors, shape (Na, Nb), from one float32 matrix
+    product (``|a|^2 + |b|^2 - 2 a.b``)."""
+    a = desc_a.astype(np.float32)
+    b = desc_b.astype(np.float32)
+    d2 = a @ b.T
+    d2 *= -2.0
+    d2 += (a * a).sum(1)[:, None]
+    d2 += (b * b).sum(1)[None, :]
+    return d2
+
+
+def mutual_matches(
+    d2: NDArray[np.float32], *, ratio: float, second_cap: float = np.inf
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Mutual nearest neighbours of a squared-distance matrix (Na, Nb; ``inf``: not a candidate) whose
+    best distance passes Lowe's ratio test against the second best of its row, that second best capped
+    at ``second_cap`` (squared). ``d2`` is used as scratch and restored."""
+    rows = np.arange(len(d2))
+    ja = np.argmin(d2, axis=1)
+    best = d2[rows, ja].copy()
+    d2[rows, ja] = np.inf
+    second = np.minimum(d2.min(axis=1), second_cap)
+    d2[rows, ja] = best
+    ok = np.isfinite(best) & (best <= d2.min(axis=0)[ja]) & (best < ratio * ratio * second)
+    return rows[ok], ja[ok]
+
+
 def match_descriptors(
     desc_a: NDArray[np.uint8], desc_b: NDArray[np.uint8], *, ratio: float
 ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """Mutual nearest neighbours (all against all) whose best distance passes Lowe's ratio test.
-
-    Squared distances come from one float32 matrix product (``|a|^2 + |b|^2 - 2 a.b``), reduced along
-    rows for each descriptor of A's best and second-best, and along columns for each of B's best.
+    """Mutual nearest neighbours (all against all) whose best distance passes Lowe's ratio test
+    (:func:`squared_distances`, :func:`mutual_matches`).
 
     Parameters
     ----------
@@ -313,20 +339,7 @@ def match_descriptors(
     empty = np.zeros(0, dtype=np.intp)
     if len(desc_a) < 2 or len(desc_b) < 2:
         return empty, empty
-    a = desc_a.astype(np.float32)
-    b = desc_b.astype(np.float32)
-    d2 = a @ b.T
-    d2 *= -2.0
-    d2 += (a * a).sum(1)[:, None]
-    d2 += (b * b).sum(1)[None, :]
-    rows = np.arange(len(a))
-    ja = np.argmin(d2, axis=1)
-    best = d2[rows, ja].copy()
-    d2[rows, ja] = np.inf
-    second = d2.min(axis=1)
-    d2[rows, ja] = best
-    ok = (best <= d2.min(axis=0)[ja]) & (best < ratio * ratio * second)
-    return rows[ok], ja[ok]
+    return mutual_matches(squared_distances(desc_a, desc_b), ratio=ratio)
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from auvnav.frames import se3
-from auvnav.vision.features import Vocabulary, match_by_word
+from auvnav.vision.features import Vocabulary, match_by_word, mutual_matches, squared_distances
 from auvnav.vision.stereo import StereoFeatures
 
 FloatArray = NDArray[np.float64]
@@ -385,8 +385,7 @@ def guided_matches(
     if len(a) < 2 or len(b) < 2:
         return empty, empty
     # Keep only the points of each side that have a candidate on the other (most of a partial overlap
-    # has none), then one float32 matrix product gives every descriptor distance, as in
-    # match_descriptors, and the window masks it.
+    # has none), then every descriptor distance (one matrix product), masked by the window.
     q = b.p_cam_m @ T_a_b[:2, :3].T + T_a_b[:2, 3]
     pa = a.p_cam_m[:, :2]
     lo, hi = q.min(axis=0) - radius_m, q.max(axis=0) + radius_m
@@ -404,23 +403,12 @@ def guided_matches(
     dy *= dy
     dx += dy
     outside = dx > np.float32(radius_m * radius_m)
-    da = a.descriptors[sa].astype(np.float32)
-    db = b.descriptors[sb].astype(np.float32)
-    d2 = da @ db.T
-    d2 *= -2.0
-    d2 += (da * da).sum(1)[:, None]
-    d2 += (db * db).sum(1)[None, :]
+    d2 = squared_distances(a.descriptors[sa], b.descriptors[sb])
     sample = d2[::7, ::3][~outside[::7, ::3]]  # the typical distance, from a sample of the candidates
     typical = float(np.median(sample)) if len(sample) else 0.0
     np.putmask(d2, outside, np.float32(np.inf))
-    rows = np.arange(len(sa))
-    jb = np.argmin(d2, axis=1)
-    best = d2[rows, jb].copy()
-    d2[rows, jb] = np.inf
-    second = np.minimum(d2.min(axis=1), typical)
-    d2[rows, jb] = best
-    ok = np.isfinite(best) & (best <= d2.min(axis=0)[jb]) & (best < ratio * ratio * second)
-    return sa[rows[ok]], sb[jb[ok]]
+    ia, ib = mutual_matches(d2, ratio=ratio, second_cap=typical)
+    return sa[ia], sb[ib]
 
 
 def register(
