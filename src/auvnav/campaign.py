@@ -359,12 +359,10 @@ class ImageRegistration:
         prior_T_a_b: FloatArray,
         sigma_m: FloatArray,
     ) -> tuple[NDArray[np.bool_], FloatArray, FloatArray]:
-        from scipy.stats import chi2
-
         from auvnav.executor import chunks
         from auvnav.frames import angle_diff
         from auvnav.vision.camera import T_body_cam
-        from auvnav.vision.loops import measurement_sigma
+        from auvnav.vision.loops import prior_agreement
 
         ctx = self._context(a)
         T_bc_a, T_bc_b = T_body_cam(ctx.rigs[a]), T_body_cam(ctx.rigs[b])
@@ -385,14 +383,12 @@ class ImageRegistration:
         C = np.stack([r[2] for r in results]) if results else np.zeros((0, 6, 6))
         # Agreement with the prior, as the loop stage's: the displacement of b from a (in a's body
         # frame, level to within the pitch and roll) and the relative heading.
-        s = ctx.settings
-        err = T[:, :2, 3] - prior_T_a_b[:, :2, 3]
-        sigma = np.hypot(sigma_m, measurement_sigma(T[:, :2, 3]))
-        gate = float(chi2.ppf(s.prior_gate_probability, 2))
-        agree = np.sum(err**2, axis=1) / sigma**2 <= gate
         yaw = np.arctan2(T[:, 1, 0], T[:, 0, 0])
         yaw_prior = np.arctan2(prior_T_a_b[:, 1, 0], prior_T_a_b[:, 0, 0])
-        agree &= np.abs(angle_diff(yaw, yaw_prior)) <= s.max_heading_disagreement_rad
+        in_gate, heading, _ = prior_agreement(
+            T[:, :2, 3], prior_T_a_b[:, :2, 3], sigma_m, angle_diff(yaw, yaw_prior), ctx.settings
+        )
+        agree = in_gate & heading
         verified = ok & agree
         log.info(
             "dives %d x %d: %d pairs registered, %d accepted, %d of them agree with the prior",

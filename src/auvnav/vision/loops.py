@@ -382,21 +382,41 @@ def _chi2_2dof(probability: float) -> float:
     return float(chi2.ppf(probability, 2))
 
 
+def prior_agreement(
+    measured_ne_m: FloatArray,
+    predicted_ne_m: FloatArray,
+    sigma_m: FloatArray,
+    dyaw_rad: FloatArray,
+    settings: LoopSettings,
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_], FloatArray]:
+    """Whether registered loops (N) agree with their priors: the measured displacement within the
+    ``prior_gate_probability`` chi-square (2 dof) of the predicted one, its sigma the prior's
+    ``sigma_m`` and the measurement's own (:func:`measurement_sigma`); and the relative heading within
+    ``max_heading_disagreement_rad`` of the prior's (``dyaw_rad``: measured less predicted). Returns
+    both tests and the sigma."""
+    err = measured_ne_m - predicted_ne_m
+    sigma = np.hypot(sigma_m, measurement_sigma(measured_ne_m))
+    in_gate = np.sum(err**2, axis=1) / sigma**2 <= _chi2_2dof(settings.prior_gate_probability)
+    return in_gate, np.abs(dyaw_rad) <= settings.max_heading_disagreement_rad, sigma
+
+
 def _prior_check(
     v: Verification, fp: Footprints, centre: FloatArray, sigma: float, settings: LoopSettings
 ) -> str:
     """Why a registered loop disagrees with the corrected prior ("" when it agrees).
 
-    ``sigma``: the corrected prior's relative uncertainty; the measured displacement's own
-    (:func:`measurement_sigma`) is added.
+    ``sigma``: the corrected prior's relative uncertainty (:func:`prior_agreement`).
     """
-    measured = fp.measured_displacement(np.array([v.i]), np.array([v.j]), v.pose6[None, :])[0]
-    err = measured - (centre[v.j] - centre[v.i])
-    sigma = float(np.hypot(sigma, measurement_sigma(measured[None, :])[0]))
-    if float(err @ err) / sigma**2 > _chi2_2dof(settings.prior_gate_probability):
-        return f"disagrees with the prior ({np.linalg.norm(err):.2f} m off, sigma {sigma:.2f} m)"
+    measured = fp.measured_displacement(np.array([v.i]), np.array([v.j]), v.pose6[None, :])
+    predicted = (centre[v.j] - centre[v.i])[None, :]
     dyaw = angle_diff(v.pose6[5], angle_diff(fp.yaw_rad[v.j], fp.yaw_rad[v.i]))
-    if abs(dyaw) > settings.max_heading_disagreement_rad:
+    in_gate, heading, total = prior_agreement(
+        measured, predicted, np.array([sigma]), np.array([dyaw]), settings
+    )
+    if not in_gate[0]:
+        off = float(np.linalg.norm(measured[0] - predicted[0]))
+        return f"disagrees with the prior ({off:.2f} m off, sigma {total[0]:.2f} m)"
+    if not heading[0]:
         return f"relative heading {np.degrees(dyaw):.1f} deg off the compass's"
     return ""
 
