@@ -20,10 +20,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from auvnav.config import dump_yaml
 from auvnav.dive import ImageIndex, read_dive, vehicle_file_name
 from auvnav.errors import InsufficientDataError
 from auvnav.footprint import footprints, polygon_overlap
@@ -72,7 +72,9 @@ def simulate_repeat(
 ) -> dict[str, Any]:
     """Fly ``scenario`` again over the site of dive ``first`` (module docstring); ``options`` as
     :func:`auvnav.sim.run.run_scenario`'s (``geometry``, ``truth_loops``, ``overwrite`` ...)."""
-    site = yaml.safe_load((first / "truth" / "truth.yaml").read_text(encoding="utf-8"))["seafloor"]["seed"]
+    floor = seafloor_from_truth(first / "truth" / "truth.yaml")
+    assert isinstance(floor, Seafloor)
+    site = floor.seed
     try:
         mound = coral_to_remove(first) if remove_coral else None
     except ValueError as err:
@@ -105,7 +107,7 @@ def simulate_repeat(
                 "area_m2": mound.area_m2,
             }
         ]
-    (out / CHANGE_FILE).write_text(yaml.safe_dump(change, sort_keys=False), encoding="utf-8")
+    (out / CHANGE_FILE).write_text(dump_yaml(change), encoding="utf-8")
     summary["change"] = change
     return summary
 
