@@ -14,10 +14,18 @@ Steps (simulation, rendering and navigation are skipped when their outputs alrea
    peak memory of each loop stage (the stage and its worker processes together).
 
 Usage: ``.venv/bin/python benchmarks/bench_vision.py [--work DIR] [--image-scale 0.5] [--water clear]
-[--speed-seconds 900] [--set NAME=VALUE ...]``: ``--water coastal|turbid`` renders the dive in that
-water (``auvnav simulate --water``; the work folder gets a folder per water), ``--speed-seconds 0``
-skips step 4, ``--set`` gives the loop stage's settings (``auvnav loops --help``), e.g.
-``--set features=2000``.
+[--seconds S] [--speed-seconds 900] [--set NAME=VALUE ...]``: ``--water coastal|turbid`` renders the
+dive in that water (``auvnav simulate --water``; the work folder gets a folder per water),
+``--seconds`` cuts the half-scale dive after S s of vehicle time (the issue-20 figures are on the
+first 900 s: ``--seconds 900 --speed-seconds 0``), ``--speed-seconds 0`` skips step 4, ``--set``
+gives the loop stage's settings (``auvnav loops --help``), e.g. ``--set features=2000`` or ``--set
+direct=false``.
+
+Besides ``evaluate``'s loops section, it prints the recall by habitat of the simulated seafloor (the
+footprint centres' midpoint on reef, a ripple field, featureless sand or other sand:
+:meth:`auvnav.sim.texture.SeafloorTexture.habitat`), the loops registered from features and from
+images (``by_method``), and the stage's CPU seconds per stereo pair, whose inverse times the cores
+is the throughput on an idle machine (the machine is shared: quote the load).
 """
 
 from __future__ import annotations
@@ -68,7 +76,7 @@ def render(dive: Path, scale: float, seconds: float | None, water: str = "clear"
     return {"rendered_pairs": len(images), "render_s": elapsed, "render_pairs_per_s": len(images) / elapsed}
 
 
-def loops(dive: Path, usage: TreeUsage, *, fresh: bool, settings: object = None) -> dict[str, float]:
+def loops(dive: Path, usage: TreeUsage, *, fresh: bool, settings: object = None) -> dict[str, object]:
     """Navigate (when needed), run the loop stage (from an empty cache when ``fresh``), evaluate.
 
     ``cores_busy_features`` and ``cores_busy_verify``: the stage's CPU time over its wall time and the
@@ -76,6 +84,8 @@ def loops(dive: Path, usage: TreeUsage, *, fresh: bool, settings: object = None)
     """
     from auvnav.evaluate import read_truth
     from auvnav.pipeline import run_stage
+    from auvnav.sim.camera import seafloor_from_truth
+    from auvnav.sim.texture import SeafloorTexture
     from auvnav.vision.evaluate import loops_section
 
     if not (dive / "products" / "nav" / "filter.csv").is_file():
@@ -104,8 +114,15 @@ def loops(dive: Path, usage: TreeUsage, *, fresh: bool, settings: object = None)
         "cores_busy_features": (marks["verify"][1] - start[1]) / (marks["verify"][0] - start[0]) / cores,
         "cores_busy_verify": (end[1] - marks["verify"][1]) / (end[0] - marks["verify"][0]) / cores,
     }
+    cpu_s = end[1] - start[1]
     truth = read_truth(dive)
-    scores = loops_section(dive, truth, truth.distance_m()) or {}
+    texture = SeafloorTexture(
+        seed=int(getattr(seafloor_from_truth(dive / "truth" / "truth.yaml"), "seed", 0))
+    )
+    scores = (
+        loops_section(dive, truth, truth.distance_m(), group=lambda ne: texture.habitat(ne[:, 0], ne[:, 1]))
+        or {}
+    )
     keep = (
         "pairs_with_features",
         "features_median",
@@ -117,6 +134,9 @@ def loops(dive: Path, usage: TreeUsage, *, fresh: bool, settings: object = None)
     return {
         **{k: summary[k] for k in keep},
         "pairs_per_s": summary["pairs_per_s"],
+        "direct_accepted": summary.get("direct_accepted", 0),
+        "cpu_s_per_pair": cpu_s / summary["pairs_with_features"],
+        "pairs_per_s_idle_cores": (os.cpu_count() or 1) * summary["pairs_with_features"] / cpu_s,
         **busy,
         "rejected": summary["rejected"],
         **scores,
@@ -127,6 +147,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--work", type=Path, default=Path("/tmp/auvnav-bench-vision"))
     parser.add_argument("--image-scale", type=float, default=0.5)
+    parser.add_argument("--seconds", type=float, default=None, help="cut the half-scale dive (vehicle time)")
     parser.add_argument("--speed-seconds", type=float, default=900.0, help="0: no full-scale run")
     parser.add_argument("--water", choices=("clear", "coastal", "turbid"), default="clear")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
@@ -141,14 +162,15 @@ def main() -> None:
     print(f"cores {os.cpu_count()}, load average {os.getloadavg()}", flush=True)
 
     water = "" if args.water == "clear" else f"-{args.water}"
-    dive = args.work / f"navcheck{water}"
+    cut = "" if args.seconds is None else f"-{args.seconds:.0f}s"
+    dive = args.work / f"navcheck{water}{cut}"
     results: dict[str, object] = {
         "image_scale": args.image_scale,
         "water": args.water,
         "settings": values,
         "load_average": os.getloadavg(),
     }
-    results.update(render(dive, args.image_scale, None, args.water))
+    results.update(render(dive, args.image_scale, args.seconds, args.water))
     with TreeUsage() as usage:
         results["half"] = loops(dive, usage, fresh=True, settings=settings)
     results["half_peak_memory_mib"] = usage.peak_mib
@@ -159,7 +181,7 @@ def main() -> None:
             results["full"] = loops(cut, usage, fresh=True, settings=settings)
         results["full_peak_memory_mib"] = usage.peak_mib
     results["load_average_end"] = os.getloadavg()
-    (args.work / f"results{water}.json").write_text(
+    (args.work / f"results{water}{cut}.json").write_text(
         json.dumps(results, indent=2, default=float), encoding="utf-8"
     )
     print(json.dumps(results, indent=2, default=float))
@@ -178,6 +200,15 @@ def main() -> None:
         assert isinstance(speed, dict)
         target = " (target >= 8)" if name == "half" else ""
         print(f"  {name + ' scale pairs/s' + target:32s} {speed['pairs_per_s']:10.4g}")
+        print(f"  {name + ' scale CPU s per pair':32s} {speed['cpu_s_per_pair']:10.4g}")
+        print(f"  {name + ' scale pairs/s, idle cores':32s} {speed['pairs_per_s_idle_cores']:10.4g}")
+    for habitat, (found, total) in half.get("recall_by_group", {}).items():
+        print(f"  recall on {habitat:22s} {found / total:10.3f}  ({found} of {total})")
+    for method, scores in half.get("by_method", {}).items():
+        print(
+            f"  loops from {method:21s} {scores['n']:10d}  precision {scores['precision']:.4f}, median "
+            f"{1000 * scores['translation_error_median_m']:.1f} mm, {scores['rotation_error_median_deg']:.3f} deg"
+        )
 
 
 if __name__ == "__main__":

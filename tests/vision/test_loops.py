@@ -74,7 +74,13 @@ def test_features_are_cached(tiny_dive, loops_run) -> None:
     for name in ("uv_rect_px", "p_cam_m", "cov_cam_m2", "descriptors"):
         np.testing.assert_array_equal(getattr(again, name), getattr(fresh, name))
     assert again.sigma_px == fresh.sigma_px
-    assert path.stat().st_size < 100_000 * len(again) / 1400  # under 100 KB for 1,400 features
+    assert again.thumbnail == fresh.thumbnail and again.thumbnail_scale == fresh.thumbnail_scale
+    thumb = again.thumbnail_image()
+    assert thumb is not None and thumb.shape == (128, 170)  # half the 340 x 256 image SIFT sees
+    assert again.thumbnail_scale == (170 / 340, 128 / 256)
+    assert len(again.thumbnail) < thumb.size  # compressed
+    features_bytes = path.stat().st_size - len(again.thumbnail)
+    assert features_bytes < 100_000 * len(again) / 1400  # under 100 KB for 1,400 features
     # other settings are another cache entry
     assert cache_path(cache, left, right, rig, FeatureSettings(scale=0.5)) != path
 

@@ -15,12 +15,15 @@
   chi-square with 6 degrees of freedom).
 - ``candidates_tested`` (from ``products/vision/summary.json``) and ``true_overlaps``: pairs, consecutive
   ones included, with a true overlap of at least ``min_overlap``.
+- ``by_method`` (when ``loops.csv`` says how each pair was registered): count, precision, median
+  errors and Mahalanobis distance of the loops from features and from images (direct registration).
 """
 
 from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -151,8 +154,14 @@ def score_loops(
     candidates_tested: int | None,
     *,
     min_overlap: float = MIN_OVERLAP,
+    group: Callable[[FloatArray], NDArray[np.str_]] | None = None,
 ) -> dict[str, Any]:
-    """The ``loops`` section (module docstring) from the loop table and the truth at the image times."""
+    """The ``loops`` section (module docstring) from the loop table and the truth at the image times.
+
+    ``group``: a label for true positions (north, east; (N, 2)); the section then also gives the
+    recall over the pairs whose footprint centres' midpoint has each label (``recall_by_group``:
+    found, pairs).
+    """
     t = images.t_s
     inside = (t >= truth.t_s[0]) & (t <= truth.t_s[-1])
     at = truth.interpolate(np.clip(t, truth.t_s[0], truth.t_s[-1]))
@@ -178,7 +187,29 @@ def score_loops(
     def median(x: FloatArray) -> float:
         return float(np.median(x)) if len(x) else float("nan")
 
+    extra: dict[str, Any] = {}
+    if loops.method is not None:
+        extra["by_method"] = {
+            m: {
+                "n": int((loops.method == m).sum()),
+                "precision": float(correct[loops.method == m].mean()),
+                "translation_error_median_m": median(trans[loops.method == m]),
+                "rotation_error_median_deg": median(rot[loops.method == m]),
+                "mahalanobis_median": median(maha[loops.method == m]),
+            }
+            for m in np.unique(loops.method)
+        }
+    if group is not None and big_loops:
+        pairs = np.array(sorted(big_loops))
+        axis = T_cam[:, :3, 2]  # the optical axis, where it meets the level floor
+        ground = T_cam[:, :3, 3] + axis * ((floor - T_cam[:, 2, 3]) / axis[:, 2])[:, None]
+        labels = group(0.5 * (ground[pairs[:, 0], :2] + ground[pairs[:, 1], :2]))
+        hit = np.array([(int(a), int(b)) in found for a, b in pairs])
+        extra["recall_by_group"] = {
+            str(g): [int(hit[labels == g].sum()), int((labels == g).sum())] for g in np.unique(labels)
+        }
     return {
+        **extra,
         "n": len(loops),
         "n_nonconsecutive": int(nonconsec.sum()),
         "recall": len(big_loops & found) / len(big_loops) if big_loops else float("nan"),
@@ -199,8 +230,15 @@ def score_loops(
     }
 
 
-def loops_section(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, Any] | None:
-    """``auvnav evaluate``'s ``loops`` section, or None when ``products/vision/loops.csv`` is absent."""
+def loops_section(
+    dive_path: Path,
+    truth: Trajectory,
+    distance_m: float,
+    *,
+    group: Callable[[FloatArray], NDArray[np.str_]] | None = None,
+) -> dict[str, Any] | None:
+    """``auvnav evaluate``'s ``loops`` section, or None when ``products/vision/loops.csv`` is absent
+    (``group``: as :func:`score_loops`)."""
     dive_path = Path(dive_path)
     path = LOOPS.path(dive_path)
     if not path.is_file():
@@ -215,5 +253,11 @@ def loops_section(dive_path: Path, truth: Trajectory, distance_m: float) -> dict
     if summary_path.is_file():
         tested = json.loads(summary_path.read_text(encoding="utf-8")).get("candidates_tested")
     return score_loops(
-        loops, dive.images, truth, image_altitude(dive, dive.images.t_s), dive.vehicle.stereo, tested
+        loops,
+        dive.images,
+        truth,
+        image_altitude(dive, dive.images.t_s),
+        dive.vehicle.stereo,
+        tested,
+        group=group,
     )

@@ -89,6 +89,10 @@ class FeatureSettings:
         Well-spread keypoints: SIFT keeps up to ``SPREAD_OVERSAMPLE`` times ``max_features`` and
         ``max_features`` of them are chosen round-robin over a ``spread_cells`` x ``spread_cells`` grid
         of the image, strongest first in each cell (:func:`spread`). 0: the strongest, wherever they are.
+    thumbnail_scale : float
+        Each pair keeps its rectified, illumination-corrected left image reduced to this fraction of
+        the size SIFT sees (:func:`auvnav.vision.stereo.make_thumbnail`), for the direct registration
+        of pairs whose keypoints are too few (:mod:`auvnav.vision.direct`). 0: none kept.
     """
 
     scale: float | None = None
@@ -99,6 +103,7 @@ class FeatureSettings:
     retry_fraction: float = 0.67
     edge_reject_px: float = 0.5
     spread_cells: int = 0
+    thumbnail_scale: float = 0.5
     sigma_px: float = 0.4
     stereo_gate_px: float = 2.0
     lk_window_px: int = 15
@@ -113,6 +118,8 @@ class FeatureSettings:
             raise ValueError("sigma_px, stereo_gate_px, lk_window_px and max_round_trip_px must be positive")
         if self.max_features < 1 or self.contrast_threshold <= 0:
             raise ValueError("max_features and contrast_threshold must be positive")
+        if not 0 <= self.thumbnail_scale <= 1:
+            raise ValueError(f"thumbnail_scale must be in [0, 1]; found {self.thumbnail_scale}")
         if not 0 <= self.retry_fraction <= 1:
             raise ValueError(f"retry_fraction must be in [0, 1]; found {self.retry_fraction}")
         if (

@@ -7,7 +7,10 @@ Each row is a 6-DOF relative pose between two stereo pairs ``i`` and ``j`` (0-ba
 ``x_m, y_m, z_m`` is the position of j's origin in i's FRD axes, ``roll_deg, pitch_deg, yaw_deg`` the
 Euler ZYX angles of ``R_i_j``. The 21 columns ``cov00 .. cov55`` (upper triangle, row-major, indices
 0..5 = x, y, z, roll, pitch, yaw) are the covariance of that 6-vector in SI units and radians (m^2,
-m rad, rad^2). ``inliers`` counts the feature correspondences that support the estimate.
+m rad, rad^2). ``inliers`` counts the feature correspondences that support the estimate. The
+optional ``method`` says how the loop stage registered the pair: ``features`` (matched stereo
+features) or ``images`` (the direct, photometric registration of :mod:`auvnav.vision.direct`, whose
+``inliers`` are the stereo points of j inside image i's view); loop files from elsewhere may omit it.
 """
 
 from __future__ import annotations
@@ -46,6 +49,8 @@ class LoopClosures(Stream):
     cov_upper : ndarray, shape (N, 21)
         Upper triangle of the 6x6 covariance of (x, y, z, roll, pitch, yaw), row-major, SI and radians.
     inliers : ndarray of int, shape (N,)
+    method : ndarray of str, shape (N,), optional
+        ``features`` or ``images`` (module docstring); None when the file has no such column.
     """
 
     i: NDArray[np.int64]
@@ -56,6 +61,7 @@ class LoopClosures(Stream):
     rpy_ij_rad: NDArray[np.float64]
     cov_upper: NDArray[np.float64]
     inliers: NDArray[np.int64]
+    method: NDArray[np.str_] | None = None
     FILE: ClassVar[str] = "products/vision/loops"
     TIME_ORDERED: ClassVar[bool] = False
     FIELDS: ClassVar[tuple[Field, ...]] = (
@@ -67,6 +73,7 @@ class LoopClosures(Stream):
         Field("rpy_ij_rad", ("roll_deg", "pitch_deg", "yaw_deg"), DEG),
         Field("cov_upper", COV_COLUMNS),
         Field("inliers", ("inliers",), kind="int"),
+        Field("method", ("method",), kind="str", required=False),
     )
 
     @property
@@ -92,6 +99,7 @@ def loops_from_transforms(
     T_i_j: NDArray[np.float64],
     covariance: NDArray[np.float64],
     inliers: NDArray[np.int64],
+    method: NDArray[np.str_] | None = None,
 ) -> LoopClosures:
     """Build :class:`LoopClosures` from 4x4 relative poses and 6x6 covariances (x, y, z, r, p, y order)."""
     yaw, pitch, roll = rot2euler(T_i_j[:, :3, :3])
@@ -105,6 +113,7 @@ def loops_from_transforms(
         rpy_ij_rad=np.column_stack([roll, pitch, yaw]),
         cov_upper=covariance[:, list(a), list(b)],
         inliers=np.asarray(inliers, dtype=np.int64),
+        method=None if method is None else np.asarray(method, dtype=str),
     )
 
 

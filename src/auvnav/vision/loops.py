@@ -14,6 +14,9 @@
 3. a verification (:func:`~auvnav.vision.registration.register`) is accepted when the registration
    is, and when it agrees with the prior: the horizontal displacement within the gate of the corrected
    prior's uncertainty, the relative heading within ``max_heading_disagreement_rad`` of the compass's.
+   A pair whose features do not register (too few repeat: featureless sand, ripple fields, turbid
+   water) is registered again from its images, photometrically (:mod:`auvnav.vision.direct`), when
+   ``LoopSettings.direct`` is set.
 
 ``loops.csv`` (DESIGN section 6), one row per accepted pair, consecutive pairs included:
 
@@ -23,7 +26,8 @@
   its rotation, ``R = Rz(yaw) Ry(pitch) Rx(roll)``);
 - ``cov00, cov01, ..., cov05, cov11, ..., cov55``: the upper triangle, row-major, of the 6 x 6
   covariance of ``(x, y, z, roll, pitch, yaw)`` in metres and radians (SI, unlike the degree columns);
-- ``inliers``: registered point matches.
+- ``inliers``: registered point matches (a direct registration: the stereo points of j inside image
+  i's view).
 
 The file is written and read by :mod:`auvnav.vision.loopfile`.
 """
@@ -61,6 +65,7 @@ from auvnav.vision.candidates import (
     candidate_pairs,
     footprints,
 )
+from auvnav.vision.direct import DirectSettings, Prepared, prepare, register_direct
 from auvnav.vision.features import FeatureSettings, Vocabulary, build_vocabulary
 from auvnav.vision.loopfile import LoopClosures, loops_from_transforms
 from auvnav.vision.registration import RegistrationSettings, expm_so3, register
@@ -94,6 +99,8 @@ class LoopSettings:
         Words of the coarse vocabulary that splits descriptor matching
         (:class:`~auvnav.vision.features.Vocabulary`), learnt from the dive's own descriptors;
         1: every descriptor against every other.
+    direct : DirectSettings or None
+        The direct (photometric) registration of pairs whose features fail to register; None: off.
     """
 
     features: FeatureSettings = field(default_factory=FeatureSettings)
@@ -104,11 +111,13 @@ class LoopSettings:
     max_rounds: int = 50
     per_image_per_round: int = 2
     vocabulary_words: int = 8
+    direct: DirectSettings | None = field(default_factory=DirectSettings)
 
 
 @dataclass(frozen=True)
 class Verification:
-    """One tested pair, in body frames (see the module docstring for the pose convention)."""
+    """One tested pair, in body frames (see the module docstring for the pose convention); ``direct``:
+    registered from the images (:mod:`auvnav.vision.direct`), not the features."""
 
     i: int
     j: int
@@ -119,6 +128,7 @@ class Verification:
     matches: int
     inliers: int
     normalised_residual: float
+    direct: bool = False
 
 
 @dataclass(frozen=True)
@@ -200,23 +210,32 @@ def _features_task(ctx: _Context, items: list[tuple[int, str, str]]) -> list[tup
 
 _load = lru_cache(maxsize=512)(read_features)  # each worker's recently used feature files
 
+
+@lru_cache(maxsize=64)
+def _prepared(path: str, settings: DirectSettings) -> Prepared | None:
+    """A pair's data for the direct registration (each worker's recently used)."""
+    return prepare(_load(path), settings)
+
+
+_REASON_BYTES = 160
 #: One verified pair in the verification cache (``products/cache/vision/verify/``): its key, then
 #: the registration's outcome (before the prior's check, which depends on the round).
 _VERIFY_RECORD = np.dtype(
     [
         ("key", "S20"),
         ("accepted", "?"),
-        ("reason", "S96"),
+        ("reason", f"S{_REASON_BYTES}"),
         ("pose6", "<f8", (6,)),
         ("cov6", "<f8", (21,)),
         ("matches", "<i8"),
         ("inliers", "<i8"),
         ("residual", "<f8"),
+        ("direct", "?"),
     ]
 )
 _UPPER = np.triu_indices(6)
 
-WorkItem = tuple[int, int, str, str, FloatArray, float, bytes]
+WorkItem = tuple[int, int, str, str, FloatArray, float, FloatArray, float, bytes]
 
 
 def _verify_task(ctx: _Context, items: list[WorkItem]) -> list[Verification]:
@@ -224,27 +243,41 @@ def _verify_task(ctx: _Context, items: list[WorkItem]) -> list[Verification]:
     T_bc = T_body_cam(ctx.rig)
     out = []
     records = np.zeros(len(items), dtype=_VERIFY_RECORD)
-    for n, (i, j, pi, pj, T_prior, sigma, key) in enumerate(items):
-        reg = register(
-            _load(pi), _load(pj), ctx.settings.registration, prior=(T_prior, sigma), vocabulary=ctx.vocabulary
-        )
+    reg_settings, direct = ctx.settings.registration, ctx.settings.direct
+    for n, (i, j, pi, pj, T_prior, sigma, T_near, sigma_near, key) in enumerate(items):
+        reg = register(_load(pi), _load(pj), reg_settings, prior=(T_prior, sigma), vocabulary=ctx.vocabulary)
+        reason, by_images = reg.reason, False
+        if not reg.accepted and direct is not None:
+            again = register_direct(
+                _prepared(pi, direct),
+                _prepared(pj, direct),
+                T_near,
+                sigma_near,
+                direct,
+                max_sigma_translation_m=reg_settings.max_sigma_translation_m,
+                max_sigma_rotation_rad=reg_settings.max_sigma_rotation_rad,
+            )
+            by_images = again.accepted
+            reg = again if again.accepted else reg
+            reason = "" if again.accepted else f"{reason}; direct: {again.reason}"
         if reg.accepted:
             p6, c6 = body_pose_and_covariance(reg.T_a_b, reg.cov_xi, T_bc)
         else:
             p6, c6 = np.full(6, np.nan), np.full((6, 6), np.nan)
         v = Verification(
-            i, j, reg.accepted, reg.reason, p6, c6, reg.matches, reg.inliers, reg.normalised_residual
+            i, j, reg.accepted, reason, p6, c6, reg.matches, reg.inliers, reg.normalised_residual, by_images
         )
         out.append(v)
         records[n] = (
             key,
             v.accepted,
-            v.reason.encode(),
+            v.reason.encode()[:_REASON_BYTES],
             p6,
             c6[_UPPER],
             v.matches,
             v.inliers,
             v.normalised_residual,
+            v.direct,
         )
     name = hashlib.sha1(b"".join(item[-1] for item in items)).hexdigest()
     path = ctx.verify_dir / f"{name}.npy"
@@ -287,6 +320,7 @@ def _from_cache(i: int, j: int, r: np.void) -> Verification:
         int(r["matches"]),
         int(r["inliers"]),
         float(r["residual"]),
+        bool(r["direct"]),
     )
 
 
@@ -514,6 +548,8 @@ def find_loops(
     fp_u = footprints(pri, image_altitude(dive, t[usable], stereo=stereo), rig)
     speed = float(np.median(np.linalg.norm(np.diff(pri.p_ned_m[:, :2], axis=0), axis=1) / np.diff(pri.t_s)))
     drift = DriftModel(pri.t_s, speed, settings.candidates)
+    turned = path_turn(pri.yaw_rad)
+    path = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pri.p_ned_m[:, :2], axis=0), axis=1))])
     # Work in positions within `usable` (u) and map back to image rows at the end.
     tested: dict[tuple[int, int], Verification] = {}
     consecutive = [(a, a + 1) for a in range(len(usable) - 1)]
@@ -525,7 +561,7 @@ def find_loops(
     while todo and rounds < settings.max_rounds:
         rounds += 1
         total += len(todo)
-        work = _work_items(todo, usable, files, pri, drift, fp_u, T_body_cam(rig), salt)
+        work = _work_items(todo, usable, files, pri, drift, fp_u, T_body_cam(rig), salt, turned, path)
         cached = [_from_cache(w[0], w[1], verified[w[-1]]) for w in work if w[-1] in verified]
         fresh = [w for w in work if w[-1] not in verified]
         reused += len(cached)
@@ -555,7 +591,7 @@ def find_loops(
     reasons: dict[str, int] = {}
     for v in out:
         if not v.accepted:
-            key = v.reason.split(" (")[0]
+            key = "; direct: ".join(part.split(" (")[0] for part in v.reason.split("; direct: "))
             reasons[key] = reasons.get(key, 0) + 1
     elapsed = time.perf_counter() - started
     summary = {
@@ -567,6 +603,7 @@ def find_loops(
         "consecutive_tested": len(consecutive),
         "loops_accepted": int(sum(v.accepted for v in out)),
         "nonconsecutive_accepted": int(sum(v.accepted and v.j - v.i > 1 for v in out)),
+        "direct_accepted": int(sum(v.accepted and v.direct for v in out)),
         "rejected": reasons,
         "rounds": rounds,
         "verifications_reused": reused,
@@ -584,7 +621,7 @@ def find_loops(
 def _verification_salt(settings: LoopSettings, vocabulary: Vocabulary | None) -> bytes:
     """What every verification depends on besides its pair and prior: the registration's settings and
     the vocabulary (learnt from the dive's features)."""
-    h = hashlib.sha1(f"verify/1:{asdict(settings.registration)}".encode())
+    h = hashlib.sha1(f"verify/2:{asdict(settings.registration)}:{settings.direct}".encode())
     if vocabulary is not None:
         h.update(np.ascontiguousarray(vocabulary.centres).tobytes())
     return h.digest()
@@ -599,18 +636,36 @@ def _work_items(
     fp: Footprints,
     T_bc: FloatArray,
     salt: bytes,
+    turns: Callable[[NDArray[np.intp], NDArray[np.intp]], FloatArray],
+    path_m: FloatArray,
 ) -> list[WorkItem]:
-    """Verification work: pairs with their feature files, the corrected prior's camera pose of j in i,
-    its lateral uncertainty (the drift model's, plus a compass heading error of 0.1 rad turning the
-    displacement), and the key of the outcome in the verification cache."""
+    """Verification work: pairs with their feature files, two priors of the camera pose of j in i
+    with their lateral uncertainties, and the key of the outcome in the verification cache.
+
+    The first prior, for the features' guided matching, is the prior corrected by the drift model,
+    with the drift model's uncertainty. The second, for the direct registration's search window,
+    is the same, or, when the dead reckoning over the track between the two images is more certain
+    (``path_m``: distance along the prior's track at each image; :data:`SHORT_SIGMA_FLOOR_M` and
+    :data:`SHORT_DRIFT_FRACTION` of the distance), the prior as it is with that uncertainty: the
+    drift model's knots are 20 s apart, its correction between them is a straight line, and it
+    has a floor of its own. Both add the compass's heading error turning the displacement
+    (:data:`HEADING_SIGMA_RAD` once the vehicle has turned a quarter turn or more between the
+    two images, in proportion below, :func:`path_turn`)."""
     a = np.array([p[0] for p in pairs], dtype=np.intp)
     b = np.array([p[1] for p in pairs], dtype=np.intp)
+    T_raw = se3(prior.R_ned_body, prior.p_ned_m) @ T_bc
     p_ned = prior.p_ned_m.copy()
     p_ned[:, :2] += drift.correction(prior.t_s)
     T = se3(prior.R_ned_body, p_ned) @ T_bc
     T_ab = se3_inverse(T[a]) @ T[b]
-    sigma = drift.relative_sigma(fp.t_s[a], fp.t_s[b])
-    sigma = np.hypot(sigma, 0.1 * np.linalg.norm(T_ab[:, :2, 3], axis=1))
+    drift_sigma = drift.relative_sigma(fp.t_s[a], fp.t_s[b])
+    short = np.hypot(SHORT_SIGMA_FLOOR_M, SHORT_DRIFT_FRACTION * np.abs(path_m[b] - path_m[a]))
+    heading = HEADING_SIGMA_RAD * np.minimum(1.0, turns(a, b) / (np.pi / 2))
+    heading = heading * np.linalg.norm(T_ab[:, :2, 3], axis=1)
+    sigma = np.hypot(drift_sigma, heading)
+    near = short < drift_sigma
+    T_near = np.where(near[:, None, None], se3_inverse(T_raw[a]) @ T_raw[b], T_ab)
+    sigma_near = np.hypot(np.where(near, short, drift_sigma), heading)
     out = []
     for k, (i, j) in enumerate(zip(a, b, strict=True)):
         fi, fj = files[int(usable[i])], files[int(usable[j])]
@@ -622,9 +677,54 @@ def _work_items(
             + b"|"
             + T_ab[k].tobytes()
             + float(sigma[k]).hex().encode()
+            + T_near[k].tobytes()
+            + float(sigma_near[k]).hex().encode()
         ).digest()
-        out.append((int(i), int(j), fi, fj, T_ab[k], float(sigma[k]), key))
+        out.append((int(i), int(j), fi, fj, T_ab[k], float(sigma[k]), T_near[k], float(sigma_near[k]), key))
     return out
+
+
+#: The dead reckoning's relative error between two images close along the track, 1-sigma, metres (the
+#: DVL's noise and the footprint model's own errors), before the share of the distance travelled.
+SHORT_SIGMA_FLOOR_M = 0.005
+#: ... and its growth with the distance travelled. On the check dive in turbid water (raw compass), the
+#: filter's relative error between images 1, 2, 4, 8 and 16 apart is a median 0.5-0.9% of the distance
+#: along the track and a 90th percentile of 1.8-2.8% (the DVL's scale error, 0.2%, and the compass's
+#: noise and deviation turning it); the deviation's change through turns is the heading term.
+SHORT_DRIFT_FRACTION = 0.01
+#: The relative heading error of two images, 1-sigma, once the vehicle has turned through a quarter
+#: turn or more between them: the compass's deviation differs from heading to heading by degrees
+#: (paper section II-C), and the same heading error is shared by images on one straight leg.
+HEADING_SIGMA_RAD = 0.1
+
+
+def path_turn(yaw_rad: FloatArray) -> Callable[[NDArray[np.intp], NDArray[np.intp]], FloatArray]:
+    """A function of index pairs (a, b), a <= b, giving how far the heading strays from its value at
+    ``a`` over ``yaw_rad[a..b]`` (radians, the largest absolute difference of the unwrapped
+    heading), in constant time per pair (a sparse table of range minima and maxima)."""
+    y = np.unwrap(np.asarray(yaw_rad, dtype=float))
+    lo, hi = [y], [y]
+    span = 1
+    while 2 * span <= len(y):
+        lo.append(np.minimum(lo[-1][:-span], lo[-1][span:]))
+        hi.append(np.maximum(hi[-1][:-span], hi[-1][span:]))
+        span *= 2
+
+    def turned(a: NDArray[np.intp], b: NDArray[np.intp]) -> FloatArray:
+        a, b = np.minimum(a, b), np.maximum(a, b)
+        if len(a) == 0:
+            return np.zeros(0)
+        level = np.floor(np.log2(b - a + 1)).astype(np.intp)
+        out = np.empty(len(a))
+        for k in np.unique(level):
+            m = level == k
+            start, end = a[m], b[m] - (1 << int(k)) + 1
+            top = np.maximum(hi[k][start], hi[k][end])
+            bottom = np.minimum(lo[k][start], lo[k][end])
+            out[m] = np.maximum(top - y[a[m]], y[a[m]] - bottom)
+        return out
+
+    return turned
 
 
 def _limit_per_image(i: NDArray[np.intp], j: NDArray[np.intp], cap: int) -> list[tuple[int, int]]:
@@ -665,4 +765,5 @@ def loop_closures(accepted: list[Verification], t_s: FloatArray) -> LoopClosures
     cov = np.array([v.cov6 for v in accepted]).reshape(-1, 6, 6)
     T = se3(euler2rot(p6[:, 5], p6[:, 4], p6[:, 3]), p6[:, :3])
     inliers = np.array([v.inliers for v in accepted], dtype=np.int64)
-    return loops_from_transforms(i, j, t_s[i], t_s[j], T, cov, inliers)
+    method = np.array(["images" if v.direct else "features" for v in accepted], dtype=str)
+    return loops_from_transforms(i, j, t_s[i], t_s[j], T, cov, inliers, method)

@@ -69,6 +69,11 @@ class VisionSettings:
         maximum=64,
     )
 
+    direct: bool = setting(
+        True,
+        "Register a pair whose features do not (featureless sand, ripple fields, turbid water) from its "
+        "images instead: photometric alignment through each pair's stereo surface.",
+    )
     guided_window: float = setting(
         3.7,
         "Prior-guided matching: match a feature only against those the navigation prior puts within this "
@@ -78,11 +83,13 @@ class VisionSettings:
     )
 
     def loop_settings(self) -> LoopSettings:
+        from auvnav.vision.direct import DirectSettings
         from auvnav.vision.features import FeatureSettings
         from auvnav.vision.loops import LoopSettings
         from auvnav.vision.registration import RegistrationSettings
 
         return LoopSettings(
+            direct=DirectSettings() if self.direct else None,
             registration=RegistrationSettings(guided_sigmas=self.guided_window),
             features=FeatureSettings(
                 scale=self.feature_scale,

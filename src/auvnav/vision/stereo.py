@@ -26,8 +26,10 @@ the points and covariances are made from, compressed: the four rectified coordin
 1/256-pixel grid (the matches are put on that grid before they are triangulated, so a point read back
 is the point computed, bit for bit), the two noise figures and the rectified geometry, and the
 descriptors as :func:`~auvnav.vision.features.compand_descriptors` gives them (4 bits each), and each
-match's disparity spread (one byte). About 80 KB a pair at half scale where single-precision records
-took 260 KB (46 KB on the check dive in turbid water, fewer matches).
+match's disparity spread (one byte), and the rectified, illumination-corrected left image at half the
+size SIFT sees, as a lossless WebP image (:func:`make_thumbnail`: what the direct registration
+aligns). On the check dive at half scale a pair's file holds about 62-68 KiB of features and 27-37
+KiB of thumbnail (turbid to clear water).
 """
 
 from __future__ import annotations
@@ -60,7 +62,7 @@ from auvnav.vision.features import FeatureSettings, compand_descriptors, correct
 log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
-CACHE_VERSION = 6
+CACHE_VERSION = 8
 #: Rectified coordinates are kept on a grid of 1/GRID_PER_PX pixel (0.004 px, well under the tracker's
 #: few hundredths).
 GRID_PER_PX = 256
@@ -76,9 +78,10 @@ EDGE_SIGMA_PER_SPREAD = 1.0 / 3.0
 #: the pair's spreads (its tracking noise: 0.06-0.19 px on the check dive in clear water, 0.2-1.1 px in
 #: turbid water, 0.09 px on scenes crowded with steps, where the 0.5 px default holds).
 EDGE_NOISE_FACTOR = 5.0
-_MAGIC = b"AUVNAVF6"
-# magic, matches, f, baseline, cx, cy, R1 (9), sigma common, sigma independent, bytes of each blob
-_HEADER = struct.Struct("<8sI15dIII")
+_MAGIC = b"AUVNAVF7"
+# magic, matches, f, baseline, cx, cy, R1 (9), sigma common, sigma independent, thumbnail scales (2),
+# bytes of each blob (geometry, descriptors, edge spreads, thumbnail)
+_HEADER = struct.Struct("<8sI17dIIII")
 
 
 @dataclass(frozen=True)
@@ -104,6 +107,13 @@ class StereoFeatures:
         pixels on a 1/:data:`EDGE_PER_PX` grid: an extra independent disparity noise of
         :data:`EDGE_SIGMA_PER_SPREAD` times it, 1-sigma, in the point's covariance (a match near a
         depth edge counts for less). None: zeros.
+    thumbnail : bytes, optional
+        The rectified, illumination-corrected left image, reduced (:func:`make_thumbnail`), as WebP:
+        what the direct registration (:mod:`auvnav.vision.direct`) aligns. None: not kept.
+    thumbnail_scale : (float, float)
+        The thumbnail's width and height over the image's ((0, 0) without one).
+    geometry : StereoGeometry, optional
+        The rectified geometry the points were triangulated in.
     """
 
     uv_rect_px: FloatArray
@@ -112,6 +122,9 @@ class StereoFeatures:
     descriptors: NDArray[np.uint8]
     sigma_px: tuple[float, float] = (0.0, 0.0)
     edge_px: FloatArray | None = None
+    thumbnail: bytes | None = None
+    thumbnail_scale: tuple[float, float] = (0.0, 0.0)
+    geometry: StereoGeometry | None = None
 
     def __post_init__(self) -> None:
         n = len(self.p_cam_m)
@@ -130,6 +143,24 @@ class StereoFeatures:
 
     def __len__(self) -> int:
         return len(self.p_cam_m)
+
+    def thumbnail_image(self) -> NDArray[np.uint8] | None:
+        """The decoded thumbnail (grey, uint8), or None."""
+        if not self.thumbnail:
+            return None
+        return cv2.imdecode(np.frombuffer(self.thumbnail, dtype=np.uint8), cv2.IMREAD_GRAYSCALE)
+
+
+def make_thumbnail(rectified_left: NDArray[np.uint8], scale: float) -> tuple[bytes, tuple[float, float]]:
+    """The illumination-corrected, rectified left image reduced by ``scale`` (area averaging), as a
+    lossless WebP image, and its width and height over the image's."""
+    h, w = rectified_left.shape
+    size = (max(8, round(w * scale)), max(8, round(h * scale)))
+    small = cv2.resize(rectified_left, size, interpolation=cv2.INTER_AREA)
+    ok, encoded = cv2.imencode(".webp", small, [cv2.IMWRITE_WEBP_QUALITY, 101])  # 101: lossless
+    if not ok:
+        raise RuntimeError("could not encode a thumbnail as WebP")
+    return encoded.tobytes(), (size[0] / w, size[1] / h)
 
 
 def stereo_features(
@@ -151,7 +182,12 @@ def stereo_features(
     uv = np.round(np.column_stack([rl[ok], rr[ok]]) * GRID_PER_PX) / GRID_PER_PX
     edge = np.minimum(np.round(spread[ok] * EDGE_PER_PX), 255) / EDGE_PER_PX
     p, cov = triangulate(uv[:, :2], uv[:, 2:], rect, *sigma, sigma_disparity_px=EDGE_SIGMA_PER_SPREAD * edge)
-    return StereoFeatures(uv, p, cov, compand_descriptors(kl.descriptors[ok]), sigma, edge)
+    thumb, thumb_scale = None, (0.0, 0.0)
+    if settings.thumbnail_scale > 0:
+        thumb, thumb_scale = make_thumbnail(flat[0], scale * settings.thumbnail_scale)
+    geometry = StereoGeometry(rect.f_px, rect.cx_px, rect.cy_px, rect.baseline_m, rect.R1)
+    descriptors = compand_descriptors(kl.descriptors[ok])
+    return StereoFeatures(uv, p, cov, descriptors, sigma, edge, thumb, thumb_scale, geometry)
 
 
 def track_right(
@@ -328,6 +364,7 @@ def write_features(features: StereoFeatures, rect: Rectification, path: Path) ->
     descriptors = zlib.compress((q[:, ::2] << 4 | q[:, 1::2]).astype(np.uint8).tobytes(), 6)
     edge_px = np.zeros(len(features)) if features.edge_px is None else features.edge_px
     edge = zlib.compress(np.minimum(np.round(edge_px * EDGE_PER_PX), 255).astype(np.uint8).tobytes(), 6)
+    thumb = features.thumbnail or b""
     header = _HEADER.pack(
         _MAGIC,
         len(features),
@@ -337,11 +374,13 @@ def write_features(features: StereoFeatures, rect: Rectification, path: Path) ->
         rect.cy_px,
         *np.asarray(rect.R1, dtype=float).ravel(),
         *features.sigma_px,
+        *features.thumbnail_scale,
         len(geometry),
         len(descriptors),
         len(edge),
+        len(thumb),
     )
-    atomic_write(path, lambda p: p.write_bytes(header + geometry + descriptors + edge))
+    atomic_write(path, lambda p: p.write_bytes(header + geometry + descriptors + edge + thumb))
 
 
 def read_features(path: Path | str) -> StereoFeatures:
@@ -351,14 +390,16 @@ def read_features(path: Path | str) -> StereoFeatures:
     if len(data) < _HEADER.size or not data.startswith(_MAGIC):
         raise ValueError("not a feature cache file of this version")
     _, n, f, b, cx, cy, *rest = _HEADER.unpack_from(data)
-    R1, (sc, si), (ng, nd, ne) = np.array(rest[:9]).reshape(3, 3), rest[9:11], rest[11:14]
+    R1, (sc, si), thumb_scale = np.array(rest[:9]).reshape(3, 3), rest[9:11], tuple(rest[11:13])
+    ng, nd, ne, nt = rest[13:17]
     start = _HEADER.size
-    if len(data) != start + ng + nd + ne:
-        raise ValueError(f"truncated feature cache file ({len(data)} bytes, expected {start + ng + nd + ne})")
+    expected = start + ng + nd + ne + nt
+    if len(data) != expected:
+        raise ValueError(f"truncated feature cache file ({len(data)} bytes, expected {expected})")
     try:
         grid = np.frombuffer(zlib.decompress(data[start : start + ng]), dtype=np.uint8)
         packed = np.frombuffer(zlib.decompress(data[start + ng : start + ng + nd]), dtype=np.uint8)
-        edge_q = np.frombuffer(zlib.decompress(data[start + ng + nd :]), dtype=np.uint8)
+        edge_q = np.frombuffer(zlib.decompress(data[start + ng + nd : start + ng + nd + ne]), dtype=np.uint8)
     except zlib.error as err:
         raise ValueError(f"corrupt feature cache file ({err})") from None
     if grid.size != 16 * n or packed.size != 64 * n or edge_q.size != n:
@@ -372,7 +413,10 @@ def read_features(path: Path | str) -> StereoFeatures:
     p, cov = triangulate(
         uv[:, :2], uv[:, 2:], geometry, sc, si, sigma_disparity_px=EDGE_SIGMA_PER_SPREAD * edge
     )
-    return StereoFeatures(uv, p, cov, desc, (sc, si), edge)
+    thumb = data[expected - nt :] if nt else None
+    return StereoFeatures(
+        uv, p, cov, desc, (sc, si), edge, thumb, thumb_scale if nt else (0.0, 0.0), geometry
+    )
 
 
 def pair_features(

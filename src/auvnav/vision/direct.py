@@ -1,0 +1,750 @@
+"""Direct (photometric) registration of two stereo pairs over low-texture, near-planar seafloor.
+
+Where SIFT finds too few repeatable keypoints (featureless sand, the one-dimensional texture of ripple
+fields, turbid water), a pair's pixels still carry the texture. This registration uses all of them:
+image alignment (Lucas and Kanade 1981; Baker and Matthews 2004, "Lucas-Kanade 20 years on: a
+unifying framework", IJCV 56(3)) of pair B's left image, lifted to 3-D by B's own stereo surface,
+onto pair A's left image, as direct visual odometry aligns frames through their depth (Engel, Koltun
+and Cremers 2018, "Direct sparse odometry", IEEE TPAMI 40(3)). The images are the rectified,
+illumination-corrected left images kept small in the feature cache
+(:attr:`auvnav.vision.stereo.StereoFeatures.thumbnail`), band-passed (a difference of Gaussians) so
+that neither the strobe's residual falloff nor sensor noise dominates.
+
+Steps (:func:`register_direct`):
+
+1. **Surfaces**: each pair's inverse depth over its image, on a regular grid of knots fitted to its
+   stereo points with a smoothness prior (:func:`fit_surface`); what the grid cannot follow is the
+   pair's relief, and a pair whose relief exceeds ``max_relief_m`` (coral heads) is left to the
+   features, whose parallax it would break.
+2. **Coarse search** (:func:`coarse_search`): A's image warped into B's view by the prior turned about
+   B's optical axis in steps of ``yaw_step_rad`` within ``yaw_range_rad``, correlated with B's
+   (normalised cross-correlation, ``cv2.matchTemplate``) at every shift within the prior's window,
+   at half the thumbnail's resolution. A pair whose window would exceed ``max_window_m`` is not
+   searched (far apart in time, its prior is loose and a wide window finds chance look-alikes).
+   The local maxima within ``peak_margin`` of the best are kept, at most ``max_peaks`` of them
+   (more: a ripple field's crests and their ridges fill the window, the pair is ambiguous).
+3. **Refinement** (:func:`refine`) from each peak: Gauss-Newton with Huber weights on the photometric
+   residuals of every ``stride``-th pixel of B (A's image where the pixel's 3-D point lands, less
+   B's, both standardised over the overlap) over the translation and the turn about the optical
+   axis, as perturbations about the overlap's centre on the seafloor; the tilt stays the prior's
+   (the attitude sensors'): the images see it only through perspective, which the stereo
+   surfaces' own errors would bias. Refinements that slide out of the window are dropped, those
+   that meet are one mode. **Ambiguity**: a second mode whose correlation is within
+   ``ambiguity_margin`` x (1 - best) of the best rejects the pair (the images at full thumbnail
+   resolution tell a ripple field's true crest from its neighbours where they can; where they
+   cannot the pair is refused, not registered to the wrong crest); so do one-dimensional texture
+   (``max_anisotropy``) and a poor correlation.
+4. **Covariance**: the inverse normal matrix of the images, scaled by the residuals' variance and
+   ``covariance_inflation``, plus what the images cannot see: the parallax of relief finer than the
+   surfaces, the error of B's range (which scales the whole motion), B's surface's tilt
+   (``surface_tilt_sigma_rad``, through the images' sensitivity to it), and the prior's tilt
+   (``tilt_sigma_rad``, through the images' coupling of tilt and translation). The loop closure
+   thus says next to nothing about the tilt, which the SLAM's attitude factors hold.
+
+A registration is rejected, with the reason, when a pair lacks a thumbnail or enough stereo points
+for its surface, is not near-planar, overlaps too little, has too loose a prior, is ambiguous or
+one-dimensional, correlates poorly, or is too uncertain along the floor.
+
+On the check dive's first 900 s at half scale (``benchmarks/bench_vision.py --seconds 900``), the
+pairs it registers are 1.2-1.4 cm and 0.36-0.40 degrees from the truth (median; the features' are
+2.5-6.5 mm and 0.07-0.18 degrees) and all but one of 351 are right in clear, coastal and turbid water.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from auvnav.frames import se3, se3_inverse
+from auvnav.vision.registration import Registration, _skew, expm_so3
+from auvnav.vision.stereo import StereoFeatures
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class DirectSettings:
+    """Settings of the direct registration (module docstring).
+
+    Parameters
+    ----------
+    max_relief_m : float
+        Largest robust RMS departure (metres, along the ray) of a pair's stereo points from its
+        quadratic surface for the pair to count as near-planar.
+    min_points : int
+        Stereo points a pair needs for its surface.
+    surface_cells : (int, int)
+        Cells of the surface's grid across and down the image (:func:`fit_surface`).
+    surface_roughness_m : float
+        1-sigma of the second difference of the seafloor's height between neighbouring knots.
+    band_sigmas_px : (float, float)
+        The difference of Gaussians' two sigmas, thumbnail pixels.
+    yaw_range_rad, yaw_step_rad : float
+        The coarse search turns the prior about B's optical axis over +-``yaw_range_rad`` in steps of
+        ``yaw_step_rad``.
+    window_sigmas, window_margin_m, max_window_m : float
+        The coarse search's translation window: ``window_sigmas`` times the prior's lateral 1-sigma
+        plus ``window_margin_m`` (the footprint model's own errors). A pair whose window would be
+        wider than ``max_window_m`` is not searched: over a wide window some patch of sand or
+        ripples correlates by chance, and the prior of such a pair (far apart in time) can be
+        further off than its uncertainty says. Over a ripple field even a narrower window can hold
+        the pattern shifted by a wavelength: the pair is then ambiguous and rejected.
+    min_overlap : float
+        Fraction of B's thumbnail that must fall inside A's at the prior.
+    peak_margin : float
+        The coarse search's local maxima within this of its best correlation are refined, at most
+        ``max_peaks`` of them, best first.
+    max_peaks : int
+    mode_radius_m : float
+        Refinements that put B's centre within this of each other in A are one mode.
+    ambiguity_margin : float
+        A second mode whose refined correlation is within this fraction of ``1 - best`` of the best
+        rejects the pair.
+    max_anisotropy : float
+        Largest ratio of the images' information about the position along the floor in their best
+        and worst directions: stripes, or ripples with no texture between the crests, fix the
+        position across them only, and nothing stops a refinement sliding along them.
+    max_along_sigma_m : float
+        Largest 1-sigma of the position along the direction the images determine worst (along
+        ripple crests): the loop closure then constrains the position across them, the heading and
+        the height. The direction they determine best must be within the registration's
+        ``max_sigma_translation_m``.
+    min_correlation : float
+        Normalised cross-correlation of the band-passed images over the overlap at the solution.
+    stride : int
+        Every ``stride``-th pixel of B (each axis) enters the refinement.
+    huber_k : float
+        Huber threshold, sigmas.
+    iterations : int
+        Most Gauss-Newton iterations.
+    candidate_iterations : int
+        Most iterations from each of several coarse peaks (the best mode is then refined fully).
+    covariance_inflation : float
+        The images' part of the covariance (the in-plane components given the out-of-plane ones) is
+        the inverse of their normal matrix times this.
+    surface_tilt_sigma_rad : float
+        1-sigma of the tilt of a pair's stereo surface (its points' depth errors vary across the
+        image: on the check dive a pair's points lean by up to a degree against the true seafloor);
+        carried into the pose by the images' sensitivity to it.
+    tilt_sigma_rad : float
+        1-sigma of the relative tilt, which the direct registration leaves at the prior's (the
+        attitude sensors'): large, so that the loop closure says next to nothing about it and the
+        SLAM's own attitude factors hold it (two pairs' stereo planes over a rugose overlap
+        disagree by a degree or more; the prior's relative tilt is within about 1 degree).
+    """
+
+    max_relief_m: float = 0.10
+    min_points: int = 30
+    surface_cells: tuple[int, int] = (8, 6)
+    surface_roughness_m: float = 0.01
+    band_sigmas_px: tuple[float, float] = (0.7, 3.0)
+    yaw_range_rad: float = float(np.radians(5.0))
+    yaw_step_rad: float = float(np.radians(1.0))
+    window_sigmas: float = 3.0
+    window_margin_m: float = 0.01
+    max_window_m: float = 0.2
+    min_overlap: float = 0.25
+    peak_margin: float = 0.15
+    max_peaks: int = 15
+    mode_radius_m: float = 0.015
+    ambiguity_margin: float = 0.25
+    max_anisotropy: float = 200.0
+    max_along_sigma_m: float = 0.05
+    min_correlation: float = 0.3
+    stride: int = 2
+    huber_k: float = 2.0
+    iterations: int = 20
+    candidate_iterations: int = 5
+    covariance_inflation: float = 30.0
+    surface_tilt_sigma_rad: float = float(np.radians(1.0))
+    tilt_sigma_rad: float = float(np.radians(2.0))
+
+
+@dataclass(frozen=True)
+class Surface:
+    """A pair's seafloor as inverse depth over the normalised coordinates (``x = X / Z``, ``y = Y / Z``)
+    of its rectified left camera: bilinear between the values at the knots of a regular grid.
+
+    Parameters
+    ----------
+    values : ndarray, shape (ny, nx)
+        Inverse depth at the knots, 1/m.
+    covariance : ndarray, shape (ny nx, ny nx)
+        Their covariance (row-major knots), 1/m^2.
+    x0, y0, dx, dy : float
+        The first knot and the knot spacing, normalised coordinates.
+    sigma_inverse_m : float
+        Robust RMS residual of the fit, 1/m.
+    relief_m : float
+        The part of it that the points' own noise does not explain, along the ray at the mean
+        range, metres: the relief finer than the grid.
+    range_m : float
+        Median range of the points, metres.
+    """
+
+    values: FloatArray
+    covariance: FloatArray
+    x0: float
+    y0: float
+    dx: float
+    dy: float
+    sigma_inverse_m: float
+    relief_m: float
+    range_m: float
+
+    def inverse_depth(self, x: FloatArray, y: FloatArray) -> FloatArray:
+        rows, weights = _bilinear(x, y, self.x0, self.y0, self.dx, self.dy, self.values.shape)
+        return np.sum(self.values.ravel()[rows] * weights, axis=-1)
+
+    def variance(self, x: float, y: float) -> float:
+        """Variance of the inverse depth at one normalised point: the knots' and the relief's."""
+        rows, weights = _bilinear(
+            np.array(x), np.array(y), self.x0, self.y0, self.dx, self.dy, self.values.shape
+        )
+        C = self.covariance[np.ix_(rows, rows)]
+        relief = self.relief_m / self.range_m**2
+        return float(weights @ C @ weights) + relief**2
+
+
+def _bilinear(
+    x: FloatArray, y: FloatArray, x0: float, y0: float, dx: float, dy: float, shape: tuple[int, int]
+) -> tuple[NDArray[np.intp], FloatArray]:
+    """The four knots (flat indices, (..., 4)) around each point and their bilinear weights, points
+    outside the grid held at its edge."""
+    ny, nx = shape
+    u = np.clip((np.asarray(x) - x0) / dx, 0.0, nx - 1 - 1e-9)
+    v = np.clip((np.asarray(y) - y0) / dy, 0.0, ny - 1 - 1e-9)
+    i, j = np.floor(u).astype(np.intp), np.floor(v).astype(np.intp)
+    fu, fv = u - i, v - j
+    rows = np.stack([j * nx + i, j * nx + i + 1, (j + 1) * nx + i, (j + 1) * nx + i + 1], axis=-1)
+    weights = np.stack([(1 - fu) * (1 - fv), fu * (1 - fv), (1 - fu) * fv, fu * fv], axis=-1)
+    return rows, weights
+
+
+def fit_surface(
+    p_rect_m: FloatArray,
+    sigma_inverse_m: FloatArray,
+    camera: Pinhole,
+    shape: tuple[int, int],
+    settings: DirectSettings,
+) -> Surface | None:
+    """The pair's :class:`Surface` over its image (``camera``, ``shape``: rows, columns) from its stereo
+    points in the rectified frame (N, 3) with inverse-depth sigmas (N,); None with fewer than
+    ``settings.min_points``.
+
+    Regularised least squares on a grid of ``settings.surface_cells`` cells: the points, weighted by
+    their own noise and reweighted (Huber at 2 robust sigmas), and the second differences of the
+    knots, whose 1-sigma is ``settings.surface_roughness_m`` of height at the points' range (relief
+    the grid follows, where points are dense; smooth across featureless gaps).
+    """
+    if len(p_rect_m) < settings.min_points:
+        return None
+    z = p_rect_m[:, 2]
+    x, y, w = p_rect_m[:, 0] / z, p_rect_m[:, 1] / z, 1.0 / z
+    nx, ny = settings.surface_cells[0] + 1, settings.surface_cells[1] + 1
+    x0, y0 = camera.normalised(np.float64(0.0), np.float64(0.0))
+    x1, y1 = camera.normalised(np.float64(shape[1] - 1), np.float64(shape[0] - 1))
+    dx, dy = (x1 - x0) / (nx - 1), (y1 - y0) / (ny - 1)
+    rows, weights = _bilinear(x, y, x0, y0, dx, dy, (ny, nx))
+    K = nx * ny
+    A = np.zeros((len(w), K))
+    np.put_along_axis(A, rows, weights, axis=1)
+    # second differences along rows and columns of the grid
+    idx = np.arange(K).reshape(ny, nx)
+    D = []
+    for a, b, c in ((idx[:, :-2], idx[:, 1:-1], idx[:, 2:]), (idx[:-2], idx[1:-1], idx[2:])):
+        block = np.zeros((a.size, K))
+        r = np.arange(a.size)
+        block[r, a.ravel()] = 1.0
+        block[r, b.ravel()] = -2.0
+        block[r, c.ravel()] = 1.0
+        D.append(block)
+    Dm = np.concatenate(D)
+    range_m = float(np.median(z))
+    smooth = settings.surface_roughness_m / range_m**2  # height -> inverse depth
+    noise2 = sigma_inverse_m**2
+    weight = 1.0 / noise2
+    prior = Dm.T @ Dm / smooth**2 + np.eye(K) * 1e-6 / float(np.median(w)) ** 2
+    values = np.zeros(K)
+    sigma = 0.0
+    for _ in range(3):
+        values = np.linalg.solve(A.T @ (A * weight[:, None]) + prior, A.T @ (weight * w))
+        r = w - A @ values
+        sigma = 1.4826 * float(np.median(np.abs(r))) + 1e-12
+        weight = _huber(np.abs(r) / np.sqrt(noise2 + sigma**2), 2.0) / noise2
+    relief2 = max(0.0, sigma**2 - float(np.median(noise2)))
+    # the knots' covariance, each point's variance its noise and the relief the grid misses
+    covariance = np.linalg.inv(A.T @ (A * (weight * noise2 / (noise2 + relief2))[:, None]) + prior)
+    return Surface(
+        values.reshape(ny, nx),
+        covariance,
+        float(x0),
+        float(y0),
+        float(dx),
+        float(dy),
+        sigma,
+        np.sqrt(relief2) * range_m**2,
+        range_m,
+    )
+
+
+@dataclass(frozen=True)
+class Pinhole:
+    """Rectified intrinsics of an image: focal lengths and principal point, pixels."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    def scaled(self, sx: float, sy: float) -> Pinhole:
+        """The same camera for the image resized by (sx, sy) (pixel centres kept)."""
+        return Pinhole(self.fx * sx, self.fy * sy, (self.cx + 0.5) * sx - 0.5, (self.cy + 0.5) * sy - 0.5)
+
+    def project(self, X: FloatArray) -> tuple[FloatArray, FloatArray]:
+        z = X[..., 2]
+        return self.fx * X[..., 0] / z + self.cx, self.fy * X[..., 1] / z + self.cy
+
+    def normalised(self, u: FloatArray, v: FloatArray) -> tuple[FloatArray, FloatArray]:
+        return (u - self.cx) / self.fx, (v - self.cy) / self.fy
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A pair's data for the direct registration, computed once per pair and reused.
+
+    Parameters
+    ----------
+    image, image_coarse : ndarray, float32
+        Band-passed thumbnail, scaled to unit standard deviation, and the same at half resolution.
+    grad_u, grad_v : ndarray, float32
+        Horizontal and vertical derivatives of ``image``.
+    camera, camera_coarse : Pinhole
+        Rectified intrinsics of ``image`` and ``image_coarse``.
+    surface : Surface or None
+    p_rect_m, sigma_inverse_m : ndarray
+        The stereo points in the rectified frame (N, 3) and each one's inverse-depth 1-sigma (N,).
+    R1 : ndarray, shape (3, 3)
+        The rotation of the left camera's frame into the rectified one.
+    """
+
+    image: NDArray[np.float32]
+    image_coarse: NDArray[np.float32]
+    grad_u: NDArray[np.float32]
+    grad_v: NDArray[np.float32]
+    camera: Pinhole
+    camera_coarse: Pinhole
+    surface: Surface | None
+    p_rect_m: FloatArray
+    sigma_inverse_m: FloatArray
+    R1: FloatArray
+
+
+def _bandpass(image: NDArray[np.float32], sigmas: tuple[float, float]) -> NDArray[np.float32]:
+    out = cv2.GaussianBlur(image, (0, 0), sigmas[0]) - cv2.GaussianBlur(image, (0, 0), sigmas[1])
+    return out / np.float32(max(float(out.std()), 1e-6))
+
+
+def prepare(features: StereoFeatures, settings: DirectSettings) -> Prepared | None:
+    """A pair's :class:`Prepared` data, or None when it has no thumbnail."""
+    thumb = features.thumbnail_image()
+    geometry = features.geometry
+    if thumb is None or geometry is None:
+        return None
+    h, w = thumb.shape
+    camera = Pinhole(geometry.f_px, geometry.f_px, geometry.cx_px, geometry.cy_px).scaled(
+        *features.thumbnail_scale
+    )
+    image = _bandpass(thumb.astype(np.float32), settings.band_sigmas_px)
+    coarse = cv2.resize(thumb, (w // 2, h // 2), interpolation=cv2.INTER_AREA).astype(np.float32)
+    camera_coarse = camera.scaled((w // 2) / w, (h // 2) / h)
+    coarse = _bandpass(coarse, (settings.band_sigmas_px[0], settings.band_sigmas_px[1] / 2))
+    grad_u = cv2.Sobel(image, cv2.CV_32F, 1, 0, ksize=1, scale=0.5)
+    grad_v = cv2.Sobel(image, cv2.CV_32F, 0, 1, ksize=1, scale=0.5)
+    R1 = np.asarray(geometry.R1, dtype=float)
+    p = features.p_cam_m @ R1.T
+    cov_z = np.einsum("i,nij,j->n", R1[2], features.cov_cam_m2, R1[2])
+    sigma_inv = np.sqrt(np.maximum(cov_z, 0.0)) / p[:, 2] ** 2
+    surface = fit_surface(p, sigma_inv, camera, (h, w), settings)
+    return Prepared(image, coarse, grad_u, grad_v, camera, camera_coarse, surface, p, sigma_inv, R1)
+
+
+def _points_of_pixels(surface: Surface, camera: Pinhole, u: FloatArray, v: FloatArray) -> FloatArray:
+    """3-D points (rectified frame) on ``surface`` seen at pixels (u, v) of ``camera``."""
+    x, y = camera.normalised(u, v)
+    z = 1.0 / surface.inverse_depth(x, y)
+    return np.stack([x * z, y * z, z], axis=-1)
+
+
+def _sample(
+    images: tuple[NDArray[np.float32], ...], camera: Pinhole, X: FloatArray
+) -> tuple[list[NDArray], NDArray]:
+    """Each image sampled (bilinear) where points X (..., 3) project, and which land inside (1 px border)."""
+    u, v = camera.project(X)
+    h, w = images[0].shape
+    inside = (X[..., 2] > 0) & (u >= 1) & (u <= w - 2) & (v >= 1) & (v <= h - 2)
+    mu, mv = u.astype(np.float32), v.astype(np.float32)
+    if mu.ndim == 1:
+        mu, mv = mu[None], mv[None]
+    out = [
+        cv2.remap(im, mu, mv, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0).reshape(
+            u.shape
+        )
+        for im in images
+    ]
+    return out, inside
+
+
+@dataclass(frozen=True)
+class CoarseResult:
+    """The coarse search: its peaks (rectified poses, best first, with their correlations and whether
+    each lies at the edge of the search; none when there are more than ``max_peaks``), the fraction
+    of B that A sees at the prior, and the number of peaks found."""
+
+    peaks: list[tuple[FloatArray, float, bool]]
+    overlap: float
+    candidates: int
+
+
+#: Peaks of the coarse search closer than this (coarse pixels) to a stronger one are not refined apart.
+PEAK_SEPARATION_PX = 3.0
+
+
+def _turn(T: FloatArray, yaw: float, shift: tuple[float, float] = (0.0, 0.0)) -> FloatArray:
+    """``T`` followed by a turn of ``yaw`` about the optical axis and a shift in the image plane."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    return T @ se3(
+        np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), np.array([shift[0], shift[1], 0.0])
+    )
+
+
+def coarse_search(
+    A: Prepared, B: Prepared, T_prior: FloatArray, window_m: float, settings: DirectSettings
+) -> CoarseResult | None:
+    """Correlation over yaw and shift at half resolution (module docstring, step 2); None when the
+    pairs overlap too little at the prior."""
+    assert B.surface is not None
+    img_b = B.image_coarse
+    h, w = img_b.shape
+    cam = B.camera_coarse
+    m = max(1, int(np.ceil(window_m * cam.fx / B.surface.range_m)))
+    u, v = np.meshgrid(np.arange(-m, w + m, dtype=float), np.arange(-m, h + m, dtype=float))
+    X = _points_of_pixels(B.surface, cam, u, v)
+    yaws = np.arange(-settings.yaw_range_rad, settings.yaw_range_rad + 1e-9, settings.yaw_step_rad)
+    maps = []
+    box = None
+    for dyaw in yaws:
+        T = _turn(T_prior, dyaw)
+        (warped,), inside = _sample((A.image_coarse,), A.camera_coarse, X @ T[:3, :3].T + T[:3, 3])
+        if box is None:
+            core = inside[m : m + h, m : m + w]
+            rows, cols = np.flatnonzero(core.mean(axis=1) > 0.5), np.flatnonzero(core.mean(axis=0) > 0.5)
+            if core.mean() < settings.min_overlap or len(rows) < 8 or len(cols) < 8:
+                return None
+            box = (rows[0], rows[-1] + 1, cols[0], cols[-1] + 1, float(core.mean()))
+        r0, r1, c0, c1, _ = box
+        corr = cv2.matchTemplate(
+            warped[r0 : r1 + 2 * m, c0 : c1 + 2 * m], img_b[r0:r1, c0:c1], cv2.TM_CCOEFF_NORMED
+        )
+        # shifts that put the template partly outside A's image are not compared (where A is blank
+        # the normalised correlation is meaningless)
+        seen = cv2.matchTemplate(
+            inside[r0 : r1 + 2 * m, c0 : c1 + 2 * m].astype(np.float32),
+            np.ones((r1 - r0, c1 - c0), np.float32),
+            cv2.TM_CCORR,
+        )
+        corr[seen < 0.95 * (r1 - r0) * (c1 - c0)] = -1.0
+        maps.append(corr)
+    assert box is not None
+    stack = np.stack(maps)
+    yy, xx = np.mgrid[-m : m + 1, -m : m + 1]
+    stack[:, yy**2 + xx**2 > m * m] = -1.0
+    flat, which = stack.max(axis=0), stack.argmax(axis=0)
+    best = float(flat.max())
+    # local maxima (3 x 3) within the peak margin of the best, best first
+    if best <= -1.0:
+        return None
+    is_peak = (flat >= cv2.dilate(flat, np.ones((3, 3), np.uint8))) & (flat >= best - settings.peak_margin)
+    iy, ix = np.nonzero(is_peak)
+    # strongest first, each at least PEAK_SEPARATION_PX from those kept
+    kept: list[int] = []
+    for n in np.argsort(-flat[iy, ix]):
+        if all((iy[n] - iy[k]) ** 2 + (ix[n] - ix[k]) ** 2 >= PEAK_SEPARATION_PX**2 for k in kept):
+            kept.append(int(n))
+    if len(kept) > settings.max_peaks:
+        return CoarseResult([], box[4], len(kept))
+    order = np.array(kept, dtype=np.intp)
+    scale = (B.surface.range_m / cam.fx, B.surface.range_m / cam.fy)
+    peaks = []
+    for y, x in zip(iy[order], ix[order], strict=True):
+        k = int(which[y, x])
+        edge = (x - m) ** 2 + (y - m) ** 2 > (m - 1.5) ** 2 or (len(yaws) > 1 and k in (0, len(yaws) - 1))
+        shift = ((x - m) * scale[0], (y - m) * scale[1])
+        peaks.append((_turn(T_prior, float(yaws[k]), shift), float(flat[y, x]), bool(edge)))
+    return CoarseResult(peaks, box[4], len(kept))
+
+
+@dataclass(frozen=True)
+class Refined:
+    """The refinement's pose (rectified frames), its covariance (``(dt, dtheta)``, rectified frame of
+    A), the covariance of its in-plane components (x, y, z, yaw) given the tilt (what the images
+    measure), the ratio of the images' largest to smallest information about the position along the
+    floor (large for one-dimensional texture), the overlap's centre on the seafloor (A's frame) about which the components
+    were estimated, the correlation at the solution and the counts of pixels and stereo points."""
+
+    T_a_b: FloatArray
+    covariance: FloatArray
+    in_plane_covariance: FloatArray
+    anisotropy: float
+    pivot: FloatArray
+    correlation: float
+    pixels: int
+    points: int
+    normalised_residual: float
+
+
+#: The components of the pose perturbation ``(dt, dtheta)`` (A's rectified camera axes: z along the
+#: optical axis, which looks at the seafloor) that the images determine (across the seafloor, the
+#: height through the image's scale, and the turn about the optical axis) and those left at the
+#: prior's (the tilt).
+IN_PLANE = np.array([0, 1, 2, 5])
+TILT = np.array([3, 4])
+
+
+def _perturb(R: FloatArray, t: FloatArray, d: FloatArray, pivot: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The pose ``(R, t)`` perturbed by ``d = (dt, dtheta)`` about ``pivot`` (frame A): ``X_a <-
+    exp(dtheta) (X_a - pivot) + pivot + dt``."""
+    E = expm_so3(d[3:])
+    return E @ R, E @ (t - pivot) + pivot + d[:3]
+
+
+def overlap_points(
+    P: FloatArray, T_other_this: FloatArray, other: Pinhole, shape: tuple[int, int]
+) -> NDArray[np.bool_]:
+    """Which points of one pair (its rectified frame) the other pair's image sees."""
+    X = P @ T_other_this[:3, :3].T + T_other_this[:3, 3]
+    u, v = other.project(X)
+    return (X[:, 2] > 0) & (u >= 0) & (u <= shape[1] - 1) & (v >= 0) & (v <= shape[0] - 1)
+
+
+def refine(A: Prepared, B: Prepared, T0: FloatArray, settings: DirectSettings) -> Refined | None:
+    """The relative pose by Gauss-Newton on the images, its tilt held at ``T0``'s; None when too
+    little overlaps.
+
+    The images see a tilt only through perspective, and tilting a camera moves its image as a shift
+    along the floor does: the tilt is left at the prior's (the attitude sensors'), with
+    ``settings.tilt_sigma_rad``, and the images give the rest (:data:`IN_PLANE`), as perturbations
+    about the overlap's centre on the seafloor, which a tilt leaves in place in the images. The
+    covariance of those adds the tilt's, carried through the images' coupling of the two, the
+    parallax of relief finer than the surfaces, and the uncertainty of B's range (which scales the
+    whole motion); it is turned at the end into the registration's perturbation about A's camera.
+    """
+    assert A.surface is not None and B.surface is not None
+    h, w = B.image.shape
+    s = settings.stride
+    u, v = np.meshgrid(np.arange(s / 2, w - 1, s, dtype=float), np.arange(s / 2, h - 1, s, dtype=float))
+    Xb = _points_of_pixels(B.surface, B.camera, u.ravel(), v.ravel())
+    Ib = cv2.remap(B.image, u.astype(np.float32), v.astype(np.float32), cv2.INTER_LINEAR).ravel()
+    cam = A.camera
+    R, t = T0[:3, :3].copy(), T0[:3, 3].copy()
+    # the pivot: the centre of B's part of the overlap, on B's surface
+    _, seen = _sample((A.image,), cam, Xb @ R.T + t)
+    if seen.sum() < 200:
+        return None
+    pivot_b = Xb[seen].mean(axis=0)
+    ii = np.ix_(IN_PLANE, IN_PLANE)
+    for _ in range(settings.iterations):
+        pivot = R @ pivot_b + t
+        (Ia, gu, gv), inside = _sample((A.image, A.grad_u, A.grad_v), cam, Xb @ R.T + t)
+        if inside.sum() < 200:
+            return None
+        Ia, gu, gv, ib = Ia[inside], gu[inside], gv[inside], Ib[inside]
+        Xa = Xb[inside] @ R.T + t
+        # both sides standardised over the overlap: the residuals' sum of squares is then that of
+        # a normalised cross-correlation, which sliding into a blank patch of A cannot lower
+        scale_a = 1.0 / max(float(Ia.std()), 1e-6)
+        r = _standardised(Ia) - _standardised(ib)
+        sigma_r = 1.4826 * float(np.median(np.abs(r - np.median(r)))) + 1e-9
+        z = Xa[:, 2]
+        # d I / d X_a = (gu fx, gv fy, -(gu fx x + gv fy y) / z) / z; d X_a / d(dt, dtheta) = [I, -[X_a - pivot]x]
+        a_u, a_v = scale_a * gu * cam.fx / z, scale_a * gv * cam.fy / z
+        dI = np.column_stack([a_u, a_v, -(a_u * Xa[:, 0] + a_v * Xa[:, 1]) / z])
+        J = np.concatenate([dI, np.cross(Xa - pivot, dI)], axis=1)
+        wp = _huber(np.abs(r) / sigma_r, settings.huber_k) / sigma_r**2
+        H = J.T @ (J * wp[:, None])
+        step = np.zeros(6)
+        try:
+            step[IN_PLANE] = -np.linalg.solve(H[ii], J[:, IN_PLANE].T @ (wp * r))
+        except np.linalg.LinAlgError:
+            return None
+        # a step that does not lower the robust cost is halved (a few times) before it is taken
+        cost = _robust_cost(r / sigma_r, settings.huber_k)
+        for _ in range(4):
+            R_new, t_new = _perturb(R, t, step, pivot)
+            (I_new,), ok = _sample((A.image,), cam, Xb @ R_new.T + t_new)
+            trial = (_standardised(I_new[ok]) - _standardised(Ib[ok])) / sigma_r
+            if ok.sum() >= 200 and _robust_cost(trial, settings.huber_k) <= cost:
+                break
+            step = 0.5 * step
+        R, t = R_new, t_new
+        if np.abs(step).max() < 1e-5:  # 10 micrometres, 10 microradians
+            break
+    pivot = R @ pivot_b + t
+    cov_images = settings.covariance_inflation * np.linalg.inv(H[ii])
+    information = np.linalg.eigvalsh(H[:2, :2])  # across the floor, from the images alone
+    anisotropy = float(information[1] / max(information[0], 1e-12 * information[1]))
+    # parallax of the relief finer than the surfaces (a point off the surface by h, seen from two
+    # cameras a baseline b apart at range Z, is displaced by h b / Z between the views), and B's
+    # range, whose relative error scales the whole motion
+    baseline = float(np.linalg.norm(t))
+    relief = max(A.surface.relief_m, B.surface.relief_m)
+    parallax = relief * baseline / float(np.median(z))
+    reach = float(np.sqrt(np.mean(np.sum((Xa[:, :2] - pivot[:2]) ** 2, axis=1))))
+    ray = pivot_b[:2] / pivot_b[2]
+    scale = baseline * pivot_b[2] * np.sqrt(B.surface.variance(ray[0], ray[1]))
+    cov_images += np.diag([parallax**2 + scale**2, parallax**2 + scale**2, scale**2, (parallax / reach) ** 2])
+    # B's surface tilted by a small angle (its inverse depth scaled by 1 + a x + b y) moves its lifted
+    # pixels by -X_b x (or y): the solution's sensitivity to that tilt, times its 1-sigma
+    xb, yb = Xb[inside, 0] / Xb[inside, 2], Xb[inside, 1] / Xb[inside, 2]
+    lever = np.sum(dI * (Xa - t), axis=1)
+    J_s = -np.column_stack([xb * lever, yb * lever])
+    sensitivity = -np.linalg.solve(H[ii], J[:, IN_PLANE].T @ (J_s * wp[:, None]))
+    cov_images += settings.surface_tilt_sigma_rad**2 * sensitivity @ sensitivity.T
+    cov_tilt = np.eye(2) * settings.tilt_sigma_rad**2
+    K = -np.linalg.solve(H[ii], H[np.ix_(IN_PLANE, TILT)])
+    cov = np.zeros((6, 6))
+    cov[np.ix_(TILT, TILT)] = cov_tilt
+    cov[ii] = cov_images + K @ cov_tilt @ K.T
+    cov[np.ix_(IN_PLANE, TILT)] = K @ cov_tilt
+    cov[np.ix_(TILT, IN_PLANE)] = (K @ cov_tilt).T
+    # about the pivot -> about A's camera: dt = dt_pivot - [t - pivot]x dtheta
+    G = np.eye(6)
+    G[:3, 3:] = -_skew(t - pivot)
+    n_pix = int(inside.sum())
+    return Refined(
+        se3(R, t),
+        G @ cov @ G.T,
+        cov_images,
+        anisotropy,
+        pivot,
+        float(np.corrcoef(Ia, ib)[0, 1]),
+        n_pix,
+        int(overlap_points(B.p_rect_m, se3(R, t), cam, A.image.shape).sum()),
+        float(np.sqrt(np.sum(wp * r * r) / max(n_pix - 4, 1))),
+    )
+
+
+def _standardised(x: NDArray) -> NDArray:
+    """``x`` less its mean, over its standard deviation."""
+    return (x - x.mean()) / max(float(x.std()), 1e-6)
+
+
+def _robust_cost(a: FloatArray, k: float) -> float:
+    """Mean Huber cost of residuals ``a`` in sigmas."""
+    b = np.abs(a)
+    return float(np.mean(np.where(b <= k, 0.5 * b * b, k * (b - 0.5 * k))))
+
+
+def _huber(a: FloatArray, k: float) -> FloatArray:
+    """Huber weights of residuals ``a`` in sigmas."""
+    return np.where(a <= k, 1.0, k / np.maximum(a, 1e-12))
+
+
+def register_direct(
+    A: Prepared | None,
+    B: Prepared | None,
+    T_prior: FloatArray,
+    sigma_m: float,
+    settings: DirectSettings,
+    *,
+    max_sigma_translation_m: float,
+    max_sigma_rotation_rad: float,
+) -> Registration:
+    """Estimate ``T_a_b`` (pair B's left camera in pair A's, unrectified camera frames, as
+    :func:`auvnav.vision.registration.register`) photometrically (module docstring).
+
+    ``T_prior``: the prior ``T_a_b``; ``sigma_m``: the 1-sigma of its lateral position, metres.
+    """
+
+    def reject(reason: str, T: FloatArray | None = None) -> Registration:
+        return Registration(
+            False, reason, np.eye(4) if T is None else T, np.full((6, 6), np.nan), 0, 0, float("nan")
+        )
+
+    if A is None or B is None:
+        return reject("no thumbnail")
+    if A.surface is None or B.surface is None:
+        return reject("too few stereo points for a surface")
+    relief = max(A.surface.relief_m, B.surface.relief_m)
+    if relief > settings.max_relief_m:
+        return reject(f"not near-planar (relief {100 * relief:.1f} cm)")
+    S = se3(A.R1, np.zeros(3))
+    S_inv = se3_inverse(S)
+    T_rect = S @ T_prior @ S_inv
+    window = settings.window_sigmas * sigma_m + settings.window_margin_m
+    if window > settings.max_window_m:
+        return reject(f"prior too uncertain (search radius {100 * window:.0f} cm)")
+    coarse = coarse_search(A, B, T_rect, window, settings)
+    if coarse is None:
+        return reject("overlap too small")
+    if not coarse.peaks:
+        return reject(f"ambiguous ({coarse.candidates} peaks within the window)")
+    # refine from every peak; peaks that converge together are one mode
+    X_b = _points_of_pixels(B.surface, B.camera, np.array(B.camera.cx), np.array(B.camera.cy))
+    modes: list[tuple[Refined, bool, FloatArray]] = []
+    quick = replace(settings, iterations=settings.candidate_iterations)
+    start = T_rect[:3, :3] @ X_b + T_rect[:3, 3]
+    for T0, _, edge in coarse.peaks:
+        fine = refine(A, B, T0, quick if len(coarse.peaks) > 1 else settings)
+        if fine is None:
+            continue
+        where = fine.T_a_b[:3, :3] @ X_b + fine.T_a_b[:3, 3]
+        if np.linalg.norm((where - start)[:2]) > window:
+            continue  # slid out of the search window: along a ridge, or to another place
+        same = [
+            k for k, (_, _, w) in enumerate(modes) if np.linalg.norm((w - where)[:2]) < settings.mode_radius_m
+        ]
+        if not same:
+            modes.append((fine, edge, where))
+        elif fine.correlation > modes[same[0]][0].correlation:
+            modes[same[0]] = (fine, edge, where)
+    if not modes:
+        return reject("no refinement stayed in the search window")
+    modes.sort(key=lambda mode: -mode[0].correlation)
+    fine, edge, _ = modes[0]
+    if len(coarse.peaks) > 1:  # the winner refined to convergence
+        fine = refine(A, B, fine.T_a_b, settings) or fine
+    T = S_inv @ fine.T_a_b @ S
+    if fine.correlation < settings.min_correlation:
+        return reject(f"poor correlation ({fine.correlation:.2f} < {settings.min_correlation})", T)
+    if len(modes) > 1:
+        second = modes[1][0].correlation
+        if fine.correlation - second < settings.ambiguity_margin * (1.0 - fine.correlation):
+            return reject(f"ambiguous (correlation {fine.correlation:.3f}, another mode {second:.3f})", T)
+    if edge:
+        return reject("best correlation at the edge of the search", T)
+    if fine.anisotropy > settings.max_anisotropy:
+        return reject(
+            f"one-dimensional texture (the images fix one direction {fine.anisotropy:.0f} times better)", T
+        )
+    across, along = np.sqrt(np.maximum(np.linalg.eigvalsh(fine.in_plane_covariance[:2, :2]), 0.0))
+    yaw_sigma = float(np.sqrt(fine.in_plane_covariance[3, 3]))
+    if not (
+        across <= max_sigma_translation_m
+        and along <= settings.max_along_sigma_m
+        and yaw_sigma <= max_sigma_rotation_rad
+    ):
+        return reject(
+            f"pose too uncertain (sigma {across:.3f} m across, {along:.3f} m along, {np.degrees(yaw_sigma):.2f} deg)",
+            T,
+        )
+    # (dt, dtheta) of the rectified frames into the camera frames: both rotate by R1^T.
+    R1t = A.R1.T
+    G = np.zeros((6, 6))
+    G[:3, :3] = G[3:, 3:] = R1t
+    return Registration(
+        True, "", T, G @ fine.covariance @ G.T, fine.pixels, fine.points, fine.normalised_residual
+    )

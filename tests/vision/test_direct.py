@@ -1,0 +1,149 @@
+"""Direct (photometric) registration of stereo pairs whose features do not register (issue 20)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import cv2
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from auvnav.frames import euler2rot, se3, se3_inverse
+from auvnav.sim.camera import camera_poses, default_stereo_rig, render_stereo_pair, scale_camera_rig, to_grey
+from auvnav.sim.texture import SeafloorTexture
+from auvnav.vision.camera import rectification
+from auvnav.vision.direct import DirectSettings, Pinhole, fit_surface, prepare, register_direct
+from auvnav.vision.features import FeatureSettings
+from auvnav.vision.registration import RegistrationSettings, register
+from auvnav.vision.stereo import stereo_features
+
+RIG = scale_camera_rig(default_stereo_rig(), 0.25)
+#: Two poses of the vehicle 2 m above a level floor 20 m down, 0.4 m apart and turned by 25 degrees.
+T_A = se3(euler2rot(0.3, 0.01, -0.01), np.array([0.0, 0.0, 18.0]))
+T_B = se3(euler2rot(0.3 + np.radians(25), -0.005, 0.01), np.array([0.35, 0.2, 18.02]))
+GATES = {"max_sigma_translation_m": 0.02, "max_sigma_rotation_rad": float(np.radians(0.5))}
+
+
+@dataclass(frozen=True)
+class Stripes:
+    """A texture of straight stripes 9 cm apart and nothing else (a perfectly regular ripple field)."""
+
+    def albedo_rgb(self, north_m, east_m, *, footprint_m: float = 0.0):
+        grey = 0.4 + 0.15 * np.sin(2 * np.pi * np.asarray(north_m) / 0.09)
+        return np.repeat(grey[..., None], 3, axis=-1).astype(np.float32)
+
+
+@pytest.fixture(scope="module")
+def bare(level_floor):
+    """Features of the two poses over featureless sand (the texture's bare patches everywhere)."""
+    texture = SeafloorTexture(seed=5, bare_fraction=1.0, coral_fraction=0.0, ripple_field_fraction=0.0)
+    floor = level_floor(20.0)
+
+    def render(T, seed):
+        rect = rectification(RIG)
+        left, right = render_stereo_pair(floor, texture, RIG, T, rng=np.random.default_rng(seed))
+        return stereo_features(to_grey(left), to_grey(right), RIG, rect, FeatureSettings())
+
+    return render(T_A, 0), render(T_B, 1)
+
+
+def true_relative() -> np.ndarray:
+    (left_a, _), (left_b, _) = camera_poses(RIG, T_A), camera_poses(RIG, T_B)
+    return se3_inverse(left_a) @ left_b
+
+
+def errors(T_est: np.ndarray, cov: np.ndarray, T_true: np.ndarray) -> tuple[float, float, float]:
+    """Translation (m) and rotation (deg) errors, and the Mahalanobis distance of the 6-dof error."""
+    dt = T_true[:3, 3] - T_est[:3, 3]
+    dtheta = cv2.Rodrigues(T_true[:3, :3] @ T_est[:3, :3].T)[0].ravel()
+    e = np.concatenate([dt, dtheta])
+    return (
+        float(np.linalg.norm(dt)),
+        float(np.degrees(np.linalg.norm(dtheta))),
+        float(e @ np.linalg.solve(cov, e)),
+    )
+
+
+def test_featureless_sand_registers_from_its_images_where_its_features_do_not(bare) -> None:
+    fa, fb = bare
+    T_true = true_relative()
+    # the prior: 2.5 cm and 1.5 degrees off, its lateral 1-sigma 1.5 cm
+    prior = T_true @ se3(euler2rot(np.radians(1.5), 0.0, 0.0), np.array([0.02, -0.015, 0.0]))
+    assert not register(fa, fb, RegistrationSettings(), prior=(prior, 0.015)).accepted
+    settings = DirectSettings()
+    reg = register_direct(prepare(fa, settings), prepare(fb, settings), prior, 0.015, settings, **GATES)
+    assert reg.accepted, reg.reason
+    translation, rotation, mahalanobis = errors(reg.T_a_b, reg.cov_xi, T_true)
+    assert translation < 0.008 and rotation < 0.2
+    assert mahalanobis < chi2.ppf(0.999, 6)
+    # the uncertainty it reports is what the images hold: tight along the floor, loose in tilt
+    sigma = np.sqrt(np.diag(reg.cov_xi))
+    assert sigma[5] < np.radians(0.5) and sigma[3] > np.radians(1.0)
+
+
+def test_a_loose_prior_or_no_thumbnail_is_refused(bare) -> None:
+    fa, fb = bare
+    settings = DirectSettings()
+    A, B = prepare(fa, settings), prepare(fb, settings)
+    far = register_direct(A, B, true_relative(), 0.2, settings, **GATES)
+    assert not far.accepted and far.reason.startswith("prior too uncertain")
+    assert prepare(replace(fa, thumbnail=None), settings) is None
+    none = register_direct(None, B, true_relative(), 0.01, settings, **GATES)
+    assert not none.accepted and none.reason == "no thumbnail"
+
+
+def test_stripes_are_never_a_position(level_floor) -> None:
+    """Along the stripes nothing tells one place from another, and across them every 9 cm looks the
+    same: whatever the prior, the pair is refused, never registered to a wrong place."""
+    floor = level_floor(20.0)
+    rect = rectification(RIG)
+
+    def render(T, seed):
+        left, right = render_stereo_pair(floor, Stripes(), RIG, T, rng=np.random.default_rng(seed))
+        feats = stereo_features(to_grey(left), to_grey(right), RIG, rect, FeatureSettings())
+        # SIFT finds next to nothing on stripes: the floor's points as a perfect stereo would give them
+        T_cam = camera_poses(RIG, T)[0]
+        n, e = np.meshgrid(np.linspace(-0.6, 0.6, 12), np.linspace(-0.6, 0.6, 12))
+        world = np.column_stack([n.ravel() + T[0, 3], e.ravel() + T[1, 3], np.full(n.size, 20.0)])
+        p = (world - T_cam[:3, 3]) @ T_cam[:3, :3]
+        p = p[p[:, 2] > 0]
+        return replace(
+            feats,
+            uv_rect_px=np.zeros((len(p), 4)),
+            p_cam_m=p,
+            cov_cam_m2=np.tile(np.eye(3) * 1e-6, (len(p), 1, 1)),
+            descriptors=np.zeros((len(p), 128), np.uint8),
+            edge_px=np.zeros(len(p)),
+        )
+
+    settings = DirectSettings()
+    A, B = prepare(render(T_A, 0), settings), prepare(render(T_B, 1), settings)
+    for sigma in (0.01, 0.04):
+        reg = register_direct(A, B, true_relative(), sigma, settings, **GATES)
+        assert not reg.accepted
+        assert reg.reason.startswith(("ambiguous", "one-dimensional", "no refinement stayed")), reg.reason
+
+
+def test_the_surface_follows_relief_coarser_than_its_grid_and_measures_what_is_finer() -> None:
+    camera = Pinhole(443.0, 443.0, 169.5, 127.5)
+    shape = (256, 340)
+    rng = np.random.default_rng(3)
+    u, v = rng.uniform(0, 339, 1500), rng.uniform(0, 255, 1500)
+    x, y = camera.normalised(u, v)
+
+    def depth(x, y, fine):
+        smooth = 2.0 + 0.05 * x + 0.1 * np.sin(2.0 * y) + 0.05 * x * y
+        return smooth + fine * np.sin(2 * np.pi * 40 * x) * np.sin(2 * np.pi * 40 * y)
+
+    for fine, relief in ((0.0, (0.0, 0.004)), (0.03, (0.01, 0.03))):
+        z = depth(x, y, fine) + rng.normal(0, 0.005, x.size)  # 5 mm of stereo noise
+        points = np.column_stack([x * z, y * z, z])
+        sigma_inverse = np.full(x.size, 0.005) / z**2
+        surface = fit_surface(points, sigma_inverse, camera, shape, DirectSettings())
+        assert surface is not None
+        gx, gy = np.meshgrid(np.linspace(x.min(), x.max(), 20), np.linspace(y.min(), y.max(), 15))
+        error = 1.0 / surface.inverse_depth(gx, gy) - depth(gx, gy, 0.0)
+        assert np.sqrt(np.mean(error**2)) < 0.006  # the smooth floor to a few millimetres
+        assert relief[0] <= surface.relief_m <= relief[1]
+    assert fit_surface(points[:10], sigma_inverse[:10], camera, shape, DirectSettings()) is None
