@@ -107,11 +107,10 @@ class DirectSettings:
         Largest ratio of the images' information about the position along the floor in their best
         and worst directions: stripes, or ripples with no texture between the crests, fix the
         position across them only, and nothing stops a refinement sliding along them.
-    max_along_sigma_m : float
-        Largest 1-sigma of the position along the direction the images determine worst (along
-        ripple crests): the loop closure then constrains the position across them, the heading and
-        the height. The direction they determine best must be within the registration's
-        ``max_sigma_translation_m``.
+    max_across_sigma_m, max_along_sigma_m, max_yaw_sigma_rad : float
+        Largest 1-sigmas, given the tilt, of the position along the floor in the direction the
+        images determine best and in the one they determine worst (along ripple crests), and of the
+        turn about the optical axis.
     min_correlation : float
         Normalised cross-correlation of the band-passed images over the overlap at the solution.
     stride : int
@@ -148,16 +147,18 @@ class DirectSettings:
     max_window_m: float = 0.2
     min_overlap: float = 0.25
     peak_margin: float = 0.15
-    max_peaks: int = 15
+    max_peaks: int = 40
     mode_radius_m: float = 0.015
     ambiguity_margin: float = 0.25
     max_anisotropy: float = 200.0
+    max_across_sigma_m: float = 0.02
     max_along_sigma_m: float = 0.05
+    max_yaw_sigma_rad: float = float(np.radians(1.0))
     min_correlation: float = 0.3
     stride: int = 2
     huber_k: float = 2.0
     iterations: int = 20
-    candidate_iterations: int = 5
+    candidate_iterations: int = 4
     covariance_inflation: float = 30.0
     surface_tilt_sigma_rad: float = float(np.radians(1.0))
     tilt_sigma_rad: float = float(np.radians(2.0))
@@ -659,9 +660,6 @@ def register_direct(
     T_prior: FloatArray,
     sigma_m: float,
     settings: DirectSettings,
-    *,
-    max_sigma_translation_m: float,
-    max_sigma_rotation_rad: float,
 ) -> Registration:
     """Estimate ``T_a_b`` (pair B's left camera in pair A's, unrectified camera frames, as
     :func:`auvnav.vision.registration.register`) photometrically (module docstring).
@@ -695,7 +693,7 @@ def register_direct(
     # refine from every peak; peaks that converge together are one mode
     X_b = _points_of_pixels(B.surface, B.camera, np.array(B.camera.cx), np.array(B.camera.cy))
     modes: list[tuple[Refined, bool, FloatArray]] = []
-    quick = replace(settings, iterations=settings.candidate_iterations)
+    quick = replace(settings, iterations=settings.candidate_iterations, stride=2 * settings.stride)
     start = T_rect[:3, :3] @ X_b + T_rect[:3, 3]
     for T0, _, edge in coarse.peaks:
         fine = refine(A, B, T0, quick if len(coarse.peaks) > 1 else settings)
@@ -733,9 +731,9 @@ def register_direct(
     across, along = np.sqrt(np.maximum(np.linalg.eigvalsh(fine.in_plane_covariance[:2, :2]), 0.0))
     yaw_sigma = float(np.sqrt(fine.in_plane_covariance[3, 3]))
     if not (
-        across <= max_sigma_translation_m
+        across <= settings.max_across_sigma_m
         and along <= settings.max_along_sigma_m
-        and yaw_sigma <= max_sigma_rotation_rad
+        and yaw_sigma <= settings.max_yaw_sigma_rad
     ):
         return reject(
             f"pose too uncertain (sigma {across:.3f} m across, {along:.3f} m along, {np.degrees(yaw_sigma):.2f} deg)",

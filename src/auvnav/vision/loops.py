@@ -211,7 +211,7 @@ def _features_task(ctx: _Context, items: list[tuple[int, str, str]]) -> list[tup
 _load = lru_cache(maxsize=512)(read_features)  # each worker's recently used feature files
 
 
-@lru_cache(maxsize=64)
+@lru_cache(maxsize=128)
 def _prepared(path: str, settings: DirectSettings) -> Prepared | None:
     """A pair's data for the direct registration (each worker's recently used)."""
     return prepare(_load(path), settings)
@@ -254,8 +254,6 @@ def _verify_task(ctx: _Context, items: list[WorkItem]) -> list[Verification]:
                 T_near,
                 sigma_near,
                 direct,
-                max_sigma_translation_m=reg_settings.max_sigma_translation_m,
-                max_sigma_rotation_rad=reg_settings.max_sigma_rotation_rad,
             )
             by_images = again.accepted
             reg = again if again.accepted else reg
