@@ -28,7 +28,7 @@ is the point computed, bit for bit), the two noise figures and the rectified geo
 descriptors as :func:`~auvnav.vision.features.compand_descriptors` gives them (4 bits each), and each
 match's disparity spread (one byte), and the rectified, illumination-corrected left image at half the
 size SIFT sees, as PNG (:func:`make_thumbnail`: what the direct registration aligns). On the check
-dive at half scale a pair's file holds about 62-68 KiB of features and 35-46 KiB of thumbnail
+dive at half scale a pair's file holds about 62-68 KiB of features and 36-46 KiB of thumbnail
 (turbid to clear water).
 """
 
