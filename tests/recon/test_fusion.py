@@ -18,6 +18,9 @@ def test_a_depth_map_with_no_depth_in_range_is_left_out() -> None:
     T = np.eye(4)  # camera at the tile's origin looking down (+z is down in NED)
     tsdf.integrate(np.zeros((240, 320), np.float32), image, T)  # all zero: nothing matched
     tsdf.integrate(np.full((240, 320), 50.0, np.float32), image, T)  # beyond the range
+    sliver = np.zeros((240, 320), np.float32)
+    sliver[101, 33] = 2.0  # one pixel in range, between the pixels Open3D samples: no block touched
+    tsdf.integrate(sliver, image, T)
     assert len(tsdf.mesh(np.eye(2), np.zeros(2))[2]) == 0
     tsdf.integrate(np.full((240, 320), 2.0, np.float32), image, T)  # a floor 2 m below
     assert len(tsdf.mesh(np.eye(2), np.zeros(2))[2]) > 0

@@ -531,8 +531,8 @@ class _Tsdf:
 
     def integrate(self, depth: NDArray[np.float32], image: NDArray[np.uint8], T_ned_rect: FloatArray) -> None:
         """One depth map (rectified left camera, metres, 0: none) with its image, placed at ``T_ned_rect``;
-        nothing when no pixel has a depth within range (a sliver of a pair in the tile, eroded away:
-        Open3D refuses a frame that touches no block)."""
+        nothing when no pixel has a depth within range, or when those that have touch no block of the
+        grid (a sliver of a pair in the tile, eroded away: Open3D refuses such a frame)."""
         if not np.any((depth > 0) & (depth <= self.max_depth)):
             return
         self.frames += 1
@@ -548,9 +548,17 @@ class _Tsdf:
             colour = o3d.t.geometry.Image(o3c.Tensor(rgb.astype(np.float32) / 255.0))
             extrinsic = o3c.Tensor(E, o3c.float64)
             mult = float(self.s.truncation_voxels)
-            coords = self.grid.compute_unique_block_coordinates(
-                d, self.intrinsic, extrinsic, 1.0, self.max_depth, mult
-            )
+            try:
+                coords = self.grid.compute_unique_block_coordinates(
+                    d, self.intrinsic, extrinsic, 1.0, self.max_depth, mult
+                )
+            except RuntimeError as err:
+                # Open3D samples the depth map on a stride: a few pixels in range between its samples
+                # touch no block, and it refuses the frame
+                if "No block is touched" not in str(err):
+                    raise
+                self.frames -= 1
+                return
             self.grid.integrate(
                 coords, d, colour, self.intrinsic, self.intrinsic, extrinsic, 1.0, self.max_depth, mult
             )
