@@ -72,8 +72,8 @@ class DirectSettings:
     Parameters
     ----------
     max_relief_m : float
-        Largest robust RMS departure (metres, along the ray) of a pair's stereo points from its
-        quadratic surface for the pair to count as near-planar.
+        Largest relief finer than a pair's surface grid (:attr:`Surface.relief_m`) for the pair to
+        count as near-planar.
     min_points : int
         Stereo points a pair needs for its surface.
     surface_cells : (int, int)
@@ -122,8 +122,10 @@ class DirectSettings:
     candidate_iterations : int
         Most iterations from each of several coarse peaks (the best mode is then refined fully).
     covariance_inflation : float
-        The images' part of the covariance (the in-plane components given the out-of-plane ones) is
-        the inverse of their normal matrix times this.
+        The images' part of the covariance (the translation and the turn given the tilt) is the
+        inverse of their normal matrix times this (neighbouring pixels of a band-passed image are
+        not independent; with the terms below, the loops from images on the check dive have a
+        median Mahalanobis distance of about 1 against the truth: conservative).
     surface_tilt_sigma_rad : float
         1-sigma of the tilt of a pair's stereo surface (its points' depth errors vary across the
         image: on the check dive a pair's points lean by up to a degree against the true seafloor);
@@ -131,8 +133,7 @@ class DirectSettings:
     tilt_sigma_rad : float
         1-sigma of the relative tilt, which the direct registration leaves at the prior's (the
         attitude sensors'): large, so that the loop closure says next to nothing about it and the
-        SLAM's own attitude factors hold it (two pairs' stereo planes over a rugose overlap
-        disagree by a degree or more; the prior's relative tilt is within about 1 degree).
+        SLAM's own attitude factors hold it (the prior's relative tilt is within about a degree).
     """
 
     max_relief_m: float = 0.10
@@ -177,11 +178,9 @@ class Surface:
         Their covariance (row-major knots), 1/m^2.
     x0, y0, dx, dy : float
         The first knot and the knot spacing, normalised coordinates.
-    sigma_inverse_m : float
-        Robust RMS residual of the fit, 1/m.
     relief_m : float
-        The part of it that the points' own noise does not explain, along the ray at the mean
-        range, metres: the relief finer than the grid.
+        The part of the fit's robust RMS residual that the points' own noise does not explain,
+        along the ray at the median range, metres: the relief finer than the grid.
     range_m : float
         Median range of the points, metres.
     """
@@ -192,7 +191,6 @@ class Surface:
     y0: float
     dx: float
     dy: float
-    sigma_inverse_m: float
     relief_m: float
     range_m: float
 
@@ -286,7 +284,6 @@ def fit_surface(
         float(y0),
         float(dx),
         float(dy),
-        sigma,
         np.sqrt(relief2) * range_m**2,
         range_m,
     )
@@ -402,11 +399,10 @@ def _sample(
 @dataclass(frozen=True)
 class CoarseResult:
     """The coarse search: its peaks (rectified poses, best first, with their correlations and whether
-    each lies at the edge of the search; none when there are more than ``max_peaks``), the fraction
-    of B that A sees at the prior, and the number of peaks found."""
+    each lies at the edge of the search; none when there are more than ``max_peaks``) and the number
+    of peaks found."""
 
     peaks: list[tuple[FloatArray, float, bool]]
-    overlap: float
     candidates: int
 
 
@@ -445,8 +441,8 @@ def coarse_search(
             rows, cols = np.flatnonzero(core.mean(axis=1) > 0.5), np.flatnonzero(core.mean(axis=0) > 0.5)
             if core.mean() < settings.min_overlap or len(rows) < 8 or len(cols) < 8:
                 return None
-            box = (rows[0], rows[-1] + 1, cols[0], cols[-1] + 1, float(core.mean()))
-        r0, r1, c0, c1, _ = box
+            box = (rows[0], rows[-1] + 1, cols[0], cols[-1] + 1)
+        r0, r1, c0, c1 = box
         corr = cv2.matchTemplate(
             warped[r0 : r1 + 2 * m, c0 : c1 + 2 * m], img_b[r0:r1, c0:c1], cv2.TM_CCOEFF_NORMED
         )
@@ -476,7 +472,7 @@ def coarse_search(
         if all((iy[n] - iy[k]) ** 2 + (ix[n] - ix[k]) ** 2 >= PEAK_SEPARATION_PX**2 for k in kept):
             kept.append(int(n))
     if len(kept) > settings.max_peaks:
-        return CoarseResult([], box[4], len(kept))
+        return CoarseResult([], len(kept))
     order = np.array(kept, dtype=np.intp)
     scale = (B.surface.range_m / cam.fx, B.surface.range_m / cam.fy)
     peaks = []
@@ -485,7 +481,7 @@ def coarse_search(
         edge = (x - m) ** 2 + (y - m) ** 2 > (m - 1.5) ** 2 or (len(yaws) > 1 and k in (0, len(yaws) - 1))
         shift = ((x - m) * scale[0], (y - m) * scale[1])
         peaks.append((_turn(T_prior, float(yaws[k]), shift), float(flat[y, x]), bool(edge)))
-    return CoarseResult(peaks, box[4], len(kept))
+    return CoarseResult(peaks, len(kept))
 
 
 @dataclass(frozen=True)
@@ -493,14 +489,13 @@ class Refined:
     """The refinement's pose (rectified frames), its covariance (``(dt, dtheta)``, rectified frame of
     A), the covariance of its in-plane components (x, y, z, yaw) given the tilt (what the images
     measure), the ratio of the images' largest to smallest information about the position along the
-    floor (large for one-dimensional texture), the overlap's centre on the seafloor (A's frame) about which the components
-    were estimated, the correlation at the solution and the counts of pixels and stereo points."""
+    floor (large for one-dimensional texture), the correlation at the solution, the counts of pixels
+    and stereo points, and the normalised residual."""
 
     T_a_b: FloatArray
     covariance: FloatArray
     in_plane_covariance: FloatArray
     anisotropy: float
-    pivot: FloatArray
     correlation: float
     pixels: int
     points: int
@@ -630,7 +625,6 @@ def refine(A: Prepared, B: Prepared, T0: FloatArray, settings: DirectSettings) -
         G @ cov @ G.T,
         cov_images,
         anisotropy,
-        pivot,
         float(np.corrcoef(Ia, ib)[0, 1]),
         n_pix,
         int(overlap_points(B.p_rect_m, se3(R, t), cam, A.image.shape).sum()),
