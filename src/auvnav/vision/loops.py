@@ -544,10 +544,10 @@ def find_loops(
             )
         stereo = (pri.t_s[ok], ranges[ok])
     fp_u = footprints(pri, image_altitude(dive, t[usable], stereo=stereo), rig)
-    speed = float(np.median(np.linalg.norm(np.diff(pri.p_ned_m[:, :2], axis=0), axis=1) / np.diff(pri.t_s)))
-    drift = DriftModel(pri.t_s, speed, settings.candidates)
+    steps = np.linalg.norm(np.diff(pri.p_ned_m[:, :2], axis=0), axis=1)  # horizontal, between images
+    drift = DriftModel(pri.t_s, float(np.median(steps / np.diff(pri.t_s))), settings.candidates)
     turned = path_turn(pri.yaw_rad)
-    path = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pri.p_ned_m[:, :2], axis=0), axis=1))])
+    path = np.concatenate([[0.0], np.cumsum(steps)])
     # Work in positions within `usable` (u) and map back to image rows at the end.
     tested: dict[tuple[int, int], Verification] = {}
     consecutive = [(a, a + 1) for a in range(len(usable) - 1)]
