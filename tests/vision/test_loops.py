@@ -53,6 +53,27 @@ def test_command_writes_loops_that_match_the_truth(tiny_dive, loops_run) -> None
     assert scores["rotation_error_median_deg"] < 0.5
     assert 1.0 < scores["mahalanobis_mean"] < 20.0
     assert scores["candidates_tested"] == loops_run["candidates_tested"]
+    # every loop says how it was registered, and the evaluation scores each kind
+    assert loops.method is not None and set(loops.method) <= {"features", "images"}
+    assert int((loops.method == "images").sum()) == loops_run["direct_accepted"]
+    assert sum(kind["n"] for kind in scores["by_method"].values()) == len(loops)
+
+
+def test_the_report_says_how_many_loops_came_from_the_images(tiny_dive, loops_run, tmp_path: Path) -> None:
+    from auvnav.report.content import dive_facts
+
+    dive = tmp_path / "dive"
+    (dive / "products" / "vision").mkdir(parents=True)
+    for name in ("dive.yaml", "vehicle.yaml"):
+        shutil.copy(tiny_dive.path / name, dive / name)
+    summary = dive / "products" / "vision" / "summary.json"
+
+    def loop_row(direct: int) -> str:
+        summary.write_text(json.dumps({**loops_run, "direct_accepted": direct}), encoding="utf-8")
+        return next(f.value for f in dive_facts(dive).figures if f.label.startswith("loop closures"))
+
+    assert loop_row(7).endswith("; 7 from the images")
+    assert "images" not in loop_row(0)
 
 
 def test_features_are_cached(tiny_dive, loops_run) -> None:

@@ -176,7 +176,8 @@ def dive_facts(dive: Path, evaluation: dict[str, Any] | None = None) -> DiveFact
         lo = ev.get("loops") or {}
         add(
             "loop closures (not consecutive)",
-            f"{vision.get('nonconsecutive_accepted', 0):,} of {vision.get('candidates_tested', 0):,} pairs tested",
+            f"{vision.get('nonconsecutive_accepted', 0):,} of {vision.get('candidates_tested', 0):,} pairs tested"
+            + (f"; {vision['direct_accepted']:,} from the images" if vision.get("direct_accepted") else ""),
             f"recall {_num(lo.get('recall'), '.3f')}, precision {_num(lo.get('precision'), '.3f')}, median error "
             f"{_num(lo.get('translation_error_median_m'), '.1f', 'mm', 1000.0)}"
             if lo
