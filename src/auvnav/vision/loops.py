@@ -586,11 +586,17 @@ def find_loops(
         for v in sorted(tested.values(), key=lambda v: (v.i, v.j))
     ]
     loops = loop_closures([v for v in out if v.accepted], t)
+    # why pairs were refused: the features' reason (or the prior's) and, apart, the images'
     reasons: dict[str, int] = {}
+    direct_reasons: dict[str, int] = {}
     for v in out:
         if not v.accepted:
-            key = "; direct: ".join(part.split(" (")[0] for part in v.reason.split("; direct: "))
+            features, _, images = v.reason.partition("; direct: ")
+            key = features.split(" (")[0]
             reasons[key] = reasons.get(key, 0) + 1
+            if images:
+                key = images.split(" (")[0]
+                direct_reasons[key] = direct_reasons.get(key, 0) + 1
     elapsed = time.perf_counter() - started
     summary = {
         "pairs": len(t),
@@ -603,6 +609,7 @@ def find_loops(
         "nonconsecutive_accepted": int(sum(v.accepted and v.j - v.i > 1 for v in out)),
         "direct_accepted": int(sum(v.accepted and v.direct for v in out)),
         "rejected": reasons,
+        "direct_rejected": direct_reasons,
         "rounds": rounds,
         "verifications_reused": reused,
         "executor": executor.name,

@@ -170,10 +170,13 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"median {summary['features_median']:.0f} triangulated features",
         f"{summary['candidates_tested']} pairs tested ({summary['consecutive_tested']} consecutive, "
         f"{summary['verifications_reused']} from the cache) in {summary['rounds']} rounds: "
-        f"{summary['loops_accepted']} accepted, {summary['nonconsecutive_accepted']} of them loop closures",
+        f"{summary['loops_accepted']} accepted, {summary['nonconsecutive_accepted']} of them loop closures"
+        + (f", {summary['direct_accepted']} from the images" if summary.get("direct_accepted") else ""),
     ]
     for reason, n in sorted(summary["rejected"].items(), key=lambda kv: -kv[1]):
         lines.append(f"  rejected: {reason}: {n}")
+    for reason, n in sorted(summary.get("direct_rejected", {}).items(), key=lambda kv: -kv[1]):
+        lines.append(f"  then from the images: {reason}: {n}")
     if summary.get("altitude_source") == "stereo":
         lines.append("  image footprints from the stereo range: nav/dvl has no altitude")
     lines.append(
