@@ -35,6 +35,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import gtsam
@@ -56,8 +57,9 @@ log = logging.getLogger(__name__)
 #: The batch solve's robust kernel thresholds, in units of the final one: graduated from residuals of
 #: metres (dead reckoning's) down to the chi-square threshold.
 GRADUATED_SCALES = (64.0, 8.0, 1.0)
-#: The batch solve with the DVL calibration estimated relinearises the odometry until no pose's
-#: rotation matrix or position changes by more than this between rounds (rad, m), or this many rounds.
+#: With the DVL calibration estimated, the batch solve relinearises the odometry until no pose's
+#: rotation matrix or position changes by more than this between rounds (m), or this many rounds
+#: (:func:`lm_relinearized`).
 RELINEARIZED_TOLERANCE = 1e-4
 MAX_RELINEARIZATIONS = 5
 #: GTSAM's default relinearisation threshold of iSAM2, which ``--incremental`` keeps.
@@ -230,19 +232,21 @@ def _isam2(
     return isam.calculateBestEstimate(), updates
 
 
-def _lm_calibrated(
-    sg: SensorGraph, drop: NDArray[np.bool_] | None, values: gtsam.Values, max_iterations: int
+def lm_relinearized(
+    build: Callable[[gtsam.Values], gtsam.NonlinearFactorGraph],
+    values: gtsam.Values,
+    max_iterations: int = 100,
 ) -> tuple[gtsam.Values, int]:
-    """The final stage again with the DVL calibration unknown: Levenberg-Marquardt (Cholesky, then
-    QR) on the graph whose odometry is linearised at the current solution
-    (:meth:`~auvnav.slam.graph.SensorGraph.odometry_at`), relinearised until no pose moves more than
-    :data:`RELINEARIZED_TOLERANCE` (a Gauss-Newton step on the odometry: two or three rounds)."""
+    """Levenberg-Marquardt (Cholesky, then QR: :func:`_lm_cholesky_then_qr`) on ``build(values)``, the
+    graph built again at each solution, until no pose's rotation matrix or position changes by more
+    than :data:`RELINEARIZED_TOLERANCE` (at most :data:`MAX_RELINEARIZATIONS` rounds): a graph whose
+    DVL odometry is linearised where it is built (:meth:`~auvnav.slam.graph.SensorGraph.odometry_at`)
+    is solved by Gauss-Newton on that odometry, two or three rounds. Returns the solution and the
+    iterations of all rounds."""
     total = 0
     for _ in range(MAX_RELINEARIZATIONS):
         before = gtsam.utilities.extractPose3(values)
-        values, n = _lm_cholesky_then_qr(
-            [sg.graph(drop_loops=drop, linearized_at=values)], values, max_iterations
-        )
+        values, n = _lm_cholesky_then_qr([build(values)], values, max_iterations)
         total += n
         if np.max(np.abs(gtsam.utilities.extractPose3(values) - before)) < RELINEARIZED_TOLERANCE:
             break
@@ -284,8 +288,10 @@ def solve(sg: SensorGraph, options: SlamOptions) -> SlamSolution:
             sg.graph(options.robust, scale, drop_loops=drop) if scale != 1.0 else graph for scale in scales
         ]
         values, iterations = _lm_cholesky_then_qr(stages, values0, options.max_iterations)
-        if sg.dvl is not None:
-            values, more = _lm_calibrated(sg, drop, values, options.max_iterations)
+        if sg.dvl is not None:  # the final stage again, with the DVL calibration unknown
+            values, more = lm_relinearized(
+                lambda at: sg.graph(drop_loops=drop, linearized_at=at), values, options.max_iterations
+            )
             iterations += more
         method = "lm"
     seconds = time.perf_counter() - start
