@@ -24,7 +24,11 @@ Images are not rendered: the loop closures come from the truth (``auvnav simulat
 depth (no tide correction) unless ``--tide`` is given, which corrects it with the dive's true tide
 (a perfect astronomical prediction).
 
-Run: ``.venv/bin/python benchmarks/bench_slam_dive.py [--out DIR] [--seed 1] [--tide] [--skip-survey]``
+With ``--estimate-dvl`` every solve also estimates the DVL's calibration (:mod:`auvnav.slam.dvl`) and
+each row says what it found.
+
+Run: ``.venv/bin/python benchmarks/bench_slam_dive.py [--out DIR] [--seed 1] [--tide] [--skip-survey]
+[--estimate-dvl]``
 """
 
 from __future__ import annotations
@@ -105,6 +109,13 @@ def simulate(scenario: str, out: Path, seed: int, **options: Any) -> dict[str, A
 
 def row(name: str, result: dict[str, Any], extra: str = "") -> str:
     s, sc = result["summary"], result["scores"]
+    dvl = s.get("dvl")
+    if dvl:
+        roll, pitch, yaw = dvl["misalignment_rpy_deg"]
+        extra += (
+            f" DVL scale {100 * dvl['scale_factor']:+.3f}% (error {100 * sc['dvl_scale_factor_error']:+.3f}%), "
+            f"mounting {roll:+.3f} {pitch:+.3f} {yaw:+.3f} deg, time offset {dvl['time_offset_s']:+.4f} s"
+        )
     return (
         f"{name:42s} poses {s['poses']:6d} loops {s['loops']['used']:6d} rejected {s['loops']['rejected']:5d} "
         f"ate_aligned {sc['ate_aligned_rmse_m']:.4f} m  solve {s['seconds']:7.1f} s  stage {result['stage_s']:7.1f} s "
@@ -118,23 +129,28 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--tide", action="store_true", help="Correct the depth with the true tide.")
     parser.add_argument("--skip-survey", action="store_true")
+    parser.add_argument("--estimate-dvl", action="store_true", help="Estimate the DVL calibration too.")
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
     args.out.mkdir(parents=True, exist_ok=True)
     print(f"# {platform.node()}, {multiprocessing.cpu_count()} cores, {time.strftime('%Y-%m-%d %H:%M')}")
     results: dict[str, Any] = {}
 
-    def tide(dive: Path) -> dict[str, Path]:
-        return {"tide": dive / "truth" / "tide.csv"} if args.tide else {}
+    def common(dive: Path) -> dict[str, Any]:
+        """The options every solve takes: the true tide (``--tide``), the DVL calibration (``--estimate-dvl``)."""
+        return {
+            **({"tide": dive / "truth" / "tide.csv"} if args.tide else {}),
+            **({"estimate_dvl": True} if args.estimate_dvl else {}),
+        }
 
     # 1. The navigation check dive.
     nav = args.out / "navcheck"
     simulate("navcheck", nav, args.seed)
-    clean = slam_run(nav, loops=nav / "truth" / "loops.csv", **tide(nav))
+    clean = slam_run(nav, loops=nav / "truth" / "loops.csv", **common(nav))
     fit_to_file([nav], CompassSettings(reference="slam"), args.out / "navcheck_fit.yaml", overwrite=True)
     fit_scores = compass_section(nav, args.out / "navcheck_fit.yaml")
-    false = slam_run(nav, loops=nav / "truth" / "loops_false20.csv", **tide(nav))
-    estimated = slam_run(nav, loops=nav / "truth" / "loops.csv", estimate_compass=True, **tide(nav))
+    false = slam_run(nav, loops=nav / "truth" / "loops_false20.csv", **common(nav))
+    estimated = slam_run(nav, loops=nav / "truth" / "loops.csv", estimate_compass=True, **common(nav))
     est_scores = compass_section(nav, nav / "products" / "slam" / "correction.yaml")
     print(row("navcheck, clean", clean))
     print(f"{'':42s} deviation fitted to SLAM headings: shape RMS {fit_scores['shape_rmse_deg']:.4f} deg")
@@ -169,8 +185,10 @@ def main() -> None:
                 simulate("survey", dive, args.seed, **flown)
                 results[name] = {}
             label = name + (", --estimate-compass" if solved else "")
-            survey_clean = slam_run(dive, loops=dive / "truth" / "loops.csv", **solved, **tide(dive))
-            survey_false = slam_run(dive, loops=dive / "truth" / "loops_false20.csv", **solved, **tide(dive))
+            survey_clean = slam_run(dive, loops=dive / "truth" / "loops.csv", **solved, **common(dive))
+            survey_false = slam_run(
+                dive, loops=dive / "truth" / "loops_false20.csv", **solved, **common(dive)
+            )
             ratio = (
                 survey_false["scores"]["ate_aligned_rmse_m"] / survey_clean["scores"]["ate_aligned_rmse_m"]
             )
@@ -179,7 +197,7 @@ def main() -> None:
             print(row(f"{label}, 20% false", survey_false, f"ratio {ratio:.3f} {rejection}"))
             results[name][label] = {"clean": survey_clean, "false20": survey_false, "false20_ratio": ratio}
         dive = args.out / "survey_corrected"
-        incremental = slam_run(dive, loops=dive / "truth" / "loops.csv", incremental=True, **tide(dive))
+        incremental = slam_run(dive, loops=dive / "truth" / "loops.csv", incremental=True, **common(dive))
         print(row("survey_corrected, clean, iSAM2", incremental))
         results["survey_corrected"]["incremental"] = incremental
 

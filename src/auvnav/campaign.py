@@ -481,9 +481,11 @@ def _loop_tangent(T: FloatArray, C: FloatArray) -> FloatArray:
 
 
 def _dive_graph(d: _DiveData) -> Any:
-    """The dive's sensor graph as its SLAM built it, with the common origin."""
+    """The dive's sensor graph as its SLAM built it, with the common origin (the DVL odometry
+    corrected by the calibration the dive's SLAM estimated, if it did)."""
     from auvnav.compass.correction import read_correction
     from auvnav.depth.tide import read_constituents
+    from auvnav.slam.dvl import DvlCalibration
     from auvnav.slam.graph import SlamOptions
     from auvnav.slam.result import sensor_graph
     from auvnav.vision.loopfile import read_loops
@@ -509,6 +511,9 @@ def _dive_graph(d: _DiveData) -> Any:
         tide=None
         if tide is None
         else read_constituents(Path(tide), latitude_rad=d.dive.info.origin.latitude_rad),
+        dvl_calibration=None
+        if s.get("dvl") is None
+        else DvlCalibration.from_summary(s["dvl"], d.dive.vehicle.dvl.R_body_sensor),
         options=options,
         loops_name=str(loops_file),
     )

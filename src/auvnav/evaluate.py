@@ -161,14 +161,46 @@ def _compass(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str,
 
 def _slam(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, Any] | None:
     """The SLAM trajectory's scores; with a deviation estimated in the graph, also that curve's
-    (``deviation_rmse_deg`` as the compass section's, ``deviation_shape_rmse_deg`` without the constant)."""
+    (``deviation_rmse_deg`` as the compass section's, ``deviation_shape_rmse_deg`` without the
+    constant); with the DVL calibrated in the graph, its errors (:func:`dvl_errors`)."""
     scores = trajectory_section(P.SLAM_TRAJECTORY)(dive_path, truth, distance_m)
     estimated = P.existing(dive_path, P.SLAM_CORRECTION)
     if scores is not None and estimated is not None:
         compass = compass_section(dive_path, estimated)
         scores["deviation_rmse_deg"] = compass["deviation_rmse_deg"]
         scores["deviation_shape_rmse_deg"] = compass["shape_rmse_deg"]
+    summary = P.SLAM_SUMMARY.path(dive_path)
+    if scores is not None and summary.is_file():
+        calibration = json.loads(summary.read_text(encoding="utf-8")).get("dvl")
+        if calibration is not None:
+            scores.update(dvl_errors(dive_path, calibration))
     return scores
+
+
+def dvl_errors(dive_path: Path, calibration: dict[str, Any]) -> dict[str, Any]:
+    """A DVL calibration estimated by SLAM (``summary.json``'s ``dvl``,
+    :meth:`auvnav.slam.dvl.DvlCalibration.summary`) against the simulator's truth (``truth.yaml``):
+    ``dvl_scale_factor_error`` (estimated less true, measured = (1 + scale) x true),
+    ``dvl_misalignment_error_deg`` (roll, pitch, yaw) and ``dvl_time_offset_error_s``, the
+    simulator's own offset being half its step (:mod:`auvnav.slam.dvl`). Empty when the truth has
+    no DVL errors."""
+    from auvnav.config import load_yaml
+
+    path = Path(dive_path) / "truth" / "truth.yaml"
+    data, _ = load_yaml(path, str(path))
+    if not isinstance(data, dict) or not isinstance(data.get("dvl"), dict):
+        return {}
+    true = data["dvl"]
+    errors: dict[str, Any] = {
+        "dvl_scale_factor_error": calibration["scale_factor"] - float(true["scale_factor"]),
+        "dvl_misalignment_error_deg": (
+            np.asarray(calibration["misalignment_rpy_deg"])
+            - np.asarray(true["misalignment_rpy_deg"], dtype=float)
+        ).tolist(),
+    }
+    if isinstance(data.get("dt_s"), (int, float)):
+        errors["dvl_time_offset_error_s"] = calibration["time_offset_s"] + 0.5 * float(data["dt_s"])
+    return errors
 
 
 def _online(dive_path: Path, truth: Trajectory, distance_m: float) -> dict[str, Any] | None:

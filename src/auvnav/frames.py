@@ -131,6 +131,15 @@ def quat_wxyz2euler(q_wxyz: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArr
     return rot2euler(quat_wxyz2rot(q_wxyz))
 
 
+def skew(v: ArrayLike) -> FloatArray:
+    """Cross-product matrices ``[v]x`` of vectors (..., 3): ``skew(v) @ u = v x u``, shape (..., 3, 3)."""
+    v = np.asarray(v, dtype=float)
+    S = np.zeros((*v.shape[:-1], 3, 3))
+    S[..., 0, 1], S[..., 0, 2], S[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    S[..., 1, 0], S[..., 2, 0], S[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    return S
+
+
 def se3(R: ArrayLike, t: ArrayLike) -> FloatArray:
     """Homogeneous 4x4 transforms from rotations (..., 3, 3) and translations (..., 3)."""
     R = np.asarray(R, dtype=float)

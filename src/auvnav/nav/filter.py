@@ -70,7 +70,7 @@ from numpy.typing import NDArray
 from auvnav.errors import ConfigError
 from auvnav.frames import FloatArray, wrap_angle
 from auvnav.nav.deadreckon import Start
-from auvnav.nav.inputs import NavInputs
+from auvnav.nav.inputs import NavInputs, interp_rows
 from auvnav.trajectory import Trajectory
 from auvnav.vehicle import Vehicle
 
@@ -338,15 +338,6 @@ def process_variance(inputs: NavInputs, cfg: FilterConfig) -> tuple[FloatArray, 
     return np.concatenate([[0.0], np.cumsum(q_h)]), np.concatenate([[0.0], np.cumsum(q_v)])
 
 
-def _interp_rows(t_new: FloatArray, t_s: FloatArray, values: FloatArray) -> FloatArray:
-    """Linear interpolation in time of an array of any shape (N, ...) at ``t_new``; shape (M, ...)."""
-    flat = values.reshape(len(t_s), -1)
-    out = np.empty((len(t_new), flat.shape[1]))
-    for k in range(flat.shape[1]):
-        out[:, k] = np.interp(t_new, t_s, flat[:, k])
-    return out.reshape(len(t_new), *values.shape[1:])
-
-
 def _harmonics(h_rad: FloatArray, n: int) -> FloatArray:
     """``[cos h, sin h, ..., cos n h, sin n h]`` of compass headings, shape (..., 2n)."""
     k = np.arange(1, n + 1)
@@ -402,7 +393,7 @@ def run_filter(inputs: NavInputs, start: Start, cfg: FilterConfig) -> FilterResu
     C = inputs.dvl_displacement_ned_m()
     L = inputs.lever_arm_ned_m()
     W = _weighted_displacement(inputs, C, cfg.deviation_harmonics)
-    CT, LT, WT = _interp_rows(T, t, C), _interp_rows(T, t, L), _interp_rows(T, t, W)
+    CT, LT, WT = interp_rows(T, t, C), interp_rows(T, t, L), interp_rows(T, t, W)
     D_dvl, D_lever, D_weighted = np.diff(CT, axis=0), -np.diff(LT, axis=0), np.diff(WT, axis=0)
     Q_h, Q_v = process_variance(inputs, cfg)
     q_h = np.diff(np.interp(T, t, Q_h))
@@ -564,11 +555,11 @@ def _densify(
     n_harmonics = (xs.shape[1] - _HARMONICS0) // 2
     basis = np.concatenate([np.ones((len(t), 1)), _harmonics(inputs.compass_heading_rad, n_harmonics)], 1)
     heading_states = [_BETA, *range(dev.start, dev.stop)]
-    coefficients = _interp_rows(t, T, xs[:, heading_states])
+    coefficients = interp_rows(t, T, xs[:, heading_states])
     heading_error = np.einsum("ni,ni->n", basis, coefficients)
     block = Ps[np.ix_(np.arange(len(T)), heading_states, heading_states)]
     var_heading = np.einsum("ni,nij,nj->n", basis, block[k], basis)
-    sd = np.sqrt(_interp_rows(t, T, np.diagonal(Ps, axis1=1, axis2=2)[:, :3]))
+    sd = np.sqrt(interp_rows(t, T, np.diagonal(Ps, axis1=1, axis2=2)[:, :3]))
     trajectory = Trajectory(
         t_s=t,
         p_ned_m=p,

@@ -233,6 +233,15 @@ class NavInputs:
         )
 
 
+def interp_rows(t_new: FloatArray, t_s: FloatArray, values: FloatArray) -> FloatArray:
+    """Linear interpolation in time of an array of any shape (N, ...) at ``t_new``; shape (M, ...)."""
+    flat = values.reshape(len(t_s), -1)
+    out = np.empty((len(t_new), flat.shape[1]))
+    for k in range(flat.shape[1]):
+        out[:, k] = np.interp(t_new, t_s, flat[:, k])
+    return out.reshape(len(t_new), *values.shape[1:])
+
+
 def declination(dive: Dive) -> tuple[float, str]:
     """The declination to add to the dive's compass heading, radians, and where it came from.
 

@@ -22,6 +22,9 @@ solves the graph. The factors:
   correction is applied and :data:`HEADING_INFLATION` times that for the raw compass (also when
   the deviation is estimated: the increments are the raw compass's). On a straight line the
   increments are as good as the compass's noise; through a turn they give way to the imagery.
+  With ``estimate_dvl`` the translation is corrected by the DVL's calibration, unknowns of the graph
+  (:mod:`auvnav.slam.dvl`: scale, mounting, the images' time offset), and the scale error leaves the
+  noise.
 - **Roll and pitch** (``AttitudeFactorPose3``: the measured direction of gravity in the body), the
   inclinometer's sigma (``vehicle.pitch_roll_sigma_rad``).
 - **Depth** (:func:`position_factor` on the down coordinate only): pressure depth of the reference
@@ -64,8 +67,16 @@ from auvnav.dive import Dive
 from auvnav.frames import FloatArray, rot2euler, se3, wrap_angle
 from auvnav.nav.deadreckon import dead_reckon
 from auvnav.nav.filter import FilterConfig, process_variance
-from auvnav.nav.inputs import NavInputs
+from auvnav.nav.inputs import NavInputs, interp_rows
 from auvnav.slam.compass import COEFFICIENTS_KEY, CompassModel
+from auvnav.slam.dvl import (
+    CALIBRATION_KEY,
+    N_CALIBRATION,
+    DvlCalibration,
+    DvlModel,
+    linearized_odometry,
+    odometry_sensitivity,
+)
 from auvnav.slam.g2o import PoseGraph
 from auvnav.slam.poses import PoseTimes, pose_key, pose_measurements
 from auvnav.slam.solve import robust_threshold
@@ -108,6 +119,9 @@ class SlamOptions:
         Estimate the deviation's coefficients (eq. 5) with the poses.
     harmonics : int
         Harmonics of the estimated deviation.
+    estimate_dvl : bool
+        Estimate the DVL odometry's calibration (scale, mounting, the images' time offset) with the
+        poses (:mod:`auvnav.slam.dvl`).
     robust : {"cauchy", "huber", "none"}
         Kernel on loop closures.
     robust_k : float or None
@@ -137,6 +151,7 @@ class SlamOptions:
     compass_sigma_rad: float | None = None
     estimate_compass: bool = False
     harmonics: int = 3
+    estimate_dvl: bool = False
     robust: Robust = "cauchy"
     robust_k: float | None = None
     loop_selection: Selection = "pcm"
@@ -180,6 +195,7 @@ def dvl_odometry(
     *,
     yaw_increment_sigma_rad: FloatArray,
     tilt_sigma_rad: float,
+    scale_noise: bool = True,
 ) -> tuple[FloatArray, FloatArray]:
     """Relative poses between consecutive pose times and their covariance (module docstring).
 
@@ -196,6 +212,9 @@ def dvl_odometry(
         Sigma of each yaw increment, radians.
     tilt_sigma_rad : float
         Sigma of the roll and pitch increments, radians.
+    scale_noise : bool
+        Count the DVL's scale error as noise of each odometry (False when the graph estimates it,
+        :mod:`auvnav.slam.dvl`).
 
     Returns
     -------
@@ -205,7 +224,7 @@ def dvl_odometry(
         In GTSAM's tangent of ``T_rel`` (rotation vector, then translation; right perturbation).
     """
     D = inputs.displacement_ned_m()
-    d_ned = np.diff(np.stack([np.interp(t, inputs.t_s, D[:, c]) for c in range(3)], -1), axis=0)
+    d_ned = np.diff(interp_rows(t, inputs.t_s, D), axis=0)
     d_body = np.einsum("nji,nj->ni", R_ned_body[:-1], d_ned)
     R_rel = np.swapaxes(R_ned_body[:-1], 1, 2) @ R_ned_body[1:]
 
@@ -217,7 +236,8 @@ def dvl_odometry(
     n = len(t) - 1
     R0 = R_ned_body[:-1]
     cov_t = np.einsum("nji,nj,njk->nik", R0, np.stack([var_h, var_h, var_v], -1), R0)
-    cov_t += config.dvl_scale_sigma**2 * d_body[:, :, None] * d_body[:, None, :]
+    if scale_noise:
+        cov_t += config.dvl_scale_sigma**2 * d_body[:, :, None] * d_body[:, None, :]
     cov_t[:, 2, 2] += (config.tilt_sigma_rad * np.linalg.norm(d_body, axis=1)) ** 2
     cov = np.zeros((n, 6, 6))
     cov[:, 0, 0] = cov[:, 1, 1] = tilt_sigma_rad**2
@@ -329,7 +349,9 @@ class SensorGraph:
     initial : ndarray, shape (P, 4, 4)
         Dead reckoning at the pose times (``T_ned_body``).
     factors : list
-        Factors in insertion order, loop closures with their robust kernel.
+        Factors in insertion order, loop closures with their robust kernel. With the DVL
+        calibration estimated (:attr:`dvl`), the odometry factors here are the uncalibrated ones:
+        the solvers take :meth:`odometry_at`, costs at a solution :meth:`calibrated_odometry`.
     plain : list
         The same factors with Gaussian noise (for chi-square costs).
     kinds : list of str
@@ -348,6 +370,11 @@ class SensorGraph:
     compass_sigma_rad : float
     pose_graph : PoseGraph
         Odometry and loop closures as relative edges (for ``graph.g2o``), poses = ``initial``.
+    dvl : DvlModel or None
+        The calibration's prior when the graph estimates the DVL odometry's calibration.
+    odometry_sensitivity : ndarray, shape (P - 1, 3, 5), or None
+        Each odometry's translation's first-order sensitivity to the calibration (when estimated
+        or given; :func:`auvnav.slam.dvl.odometry_sensitivity`).
     """
 
     times: PoseTimes
@@ -362,32 +389,89 @@ class SensorGraph:
     compass: CompassModel
     compass_sigma_rad: float
     pose_graph: PoseGraph
+    dvl: DvlModel | None = None
+    odometry_sensitivity: FloatArray | None = None
 
     def factor_counts(self) -> dict[str, int]:
         """Factors by kind."""
         kinds, counts = np.unique(self.kinds, return_counts=True)
         return {str(k): int(c) for k, c in zip(kinds, counts, strict=True)}
 
-    def values(
-        self, T_ned_body: FloatArray | None = None, coefficients: FloatArray | None = None
+    def unknowns(
+        self, coefficients: FloatArray | None = None, calibration: FloatArray | None = None
     ) -> gtsam.Values:
-        """GTSAM values: the poses (default: the initial guess) and the compass coefficients."""
-        poses = self.initial if T_ned_body is None else T_ned_body
+        """GTSAM values of the unknowns besides the poses: the compass coefficients and the DVL
+        calibration when estimated, at zero (the initial guess) or as given."""
         values = gtsam.Values()
-        for k, T in enumerate(poses):
-            values.insert(pose_key(k), gtsam.Pose3(T))
         if self.compass.estimate:
             x = np.zeros(self.compass.n_coefficients) if coefficients is None else coefficients
             values.insert(COEFFICIENTS_KEY, np.asarray(x, dtype=float))
+        if self.dvl is not None:
+            c = np.zeros(N_CALIBRATION) if calibration is None else calibration
+            values.insert(CALIBRATION_KEY, np.asarray(c, dtype=float))
         return values
+
+    def values(
+        self,
+        T_ned_body: FloatArray | None = None,
+        coefficients: FloatArray | None = None,
+        calibration: FloatArray | None = None,
+    ) -> gtsam.Values:
+        """GTSAM values: the poses (default: the initial guess) and the other unknowns (:meth:`unknowns`)."""
+        poses = self.initial if T_ned_body is None else T_ned_body
+        values = self.unknowns(coefficients, calibration)
+        for k, T in enumerate(poses):
+            values.insert(pose_key(k), gtsam.Pose3(T))
+        return values
+
+    def _odometry(self, f: int) -> tuple[int, int, FloatArray, FloatArray, gtsam.noiseModel.Base]:
+        """Keys, uncalibrated measurement, calibration sensitivity and noise of odometry factor ``f`` of
+        a graph estimating the DVL calibration."""
+        if self.dvl is None or self.odometry_sensitivity is None or self.kinds[f] != "odometry":
+            raise ValueError(
+                f"factor {f} is not an odometry factor of a graph estimating the DVL calibration"
+            )
+        k = int(self.last_pose[f])
+        noise = self.factors[f].noiseModel()
+        return (
+            pose_key(k - 1),
+            pose_key(k),
+            self.pose_graph.T_ij[k - 1],
+            self.odometry_sensitivity[k - 1],
+            noise,
+        )
+
+    def calibrated_odometry(self, f: int, calibration: FloatArray) -> gtsam.BetweenFactorPose3:
+        """Odometry factor ``f`` with its translation corrected by a known calibration ``c``,
+        ``t + J c`` (:mod:`auvnav.slam.dvl`)."""
+        i, j, T, J, noise = self._odometry(f)
+        T = T.copy()
+        T[:3, 3] += J @ np.asarray(calibration, dtype=float)
+        return gtsam.BetweenFactorPose3(i, j, gtsam.Pose3(T), noise)
+
+    def odometry_at(self, f: int, values: gtsam.Values) -> gtsam.LinearContainerFactor:
+        """Odometry factor ``f`` with the DVL calibration unknown, linearised at ``values`` (its poses
+        and the calibration; :func:`auvnav.slam.dvl.linearized_odometry`)."""
+        i, j, T, J, noise = self._odometry(f)
+        return linearized_odometry(
+            i, j, T, J, noise, values.atPose3(i), values.atPose3(j), values.atVector(CALIBRATION_KEY)
+        )
 
     def graph(
         self,
         kernel: Robust | Literal["built"] = "built",
         scale: float = 1.0,
         drop_loops: NDArray[np.bool_] | None = None,
+        *,
+        linearized_at: gtsam.Values | None = None,
+        calibration: FloatArray | None = None,
     ) -> gtsam.NonlinearFactorGraph:
         """The GTSAM factor graph.
+
+        With the DVL calibration estimated (:attr:`dvl`), the odometry factors are either linearised
+        at ``linearized_at`` with the calibration unknown (:meth:`odometry_at`: for solving), or
+        exact ``BetweenFactorPose3`` for the given ``calibration`` (for the cost at a solution);
+        neither, the uncalibrated odometry.
 
         Parameters
         ----------
@@ -397,12 +481,20 @@ class SensorGraph:
         scale : float
         drop_loops : ndarray of bool, shape (L,), optional
             Loop closures (in the order of :attr:`loop_rows`) to leave out.
+        linearized_at : gtsam.Values, optional
+        calibration : ndarray, shape (5,), optional
         """
         graph = gtsam.NonlinearFactorGraph()
         loop = 0
         # The loop closures are the pose graph's edges after the odometry.
         first_loop_edge = self.pose_graph.n_poses - 1
-        for factor, kind in zip(self.factors, self.kinds, strict=True):
+        for f, (factor, kind) in enumerate(zip(self.factors, self.kinds, strict=True)):
+            if kind == "odometry" and self.dvl is not None and linearized_at is not None:
+                graph.add(self.odometry_at(f, linearized_at))
+                continue
+            if kind == "odometry" and self.dvl is not None and calibration is not None:
+                graph.add(self.calibrated_odometry(f, calibration))
+                continue
             if kind != "loop":
                 graph.add(factor)
                 continue
@@ -426,6 +518,7 @@ def build_graph(
     *,
     options: SlamOptions,
     tide: TideModel | None = None,
+    dvl_calibration: DvlCalibration | None = None,
     loops_name: str = "loops",
 ) -> SensorGraph:
     """Assemble the factor graph of a dive (module docstring).
@@ -443,6 +536,8 @@ def build_graph(
     options : SlamOptions
     tide : TideModel, optional
         Subtracted from the pressure depth.
+    dvl_calibration : DvlCalibration, optional
+        A fixed calibration of the DVL odometry (not with ``options.estimate_dvl``).
     loops_name : str
         The loop file, for messages.
 
@@ -459,7 +554,7 @@ def build_graph(
 
     # Initial guess: dead reckoning's positions, the averaged attitude.
     dr = dead_reckon(inputs)
-    p0 = np.stack([np.interp(times.t_s, dr.t_s, dr.p_ned_m[:, c]) for c in range(3)], -1)
+    p0 = interp_rows(times.t_s, dr.t_s, dr.p_ned_m)
     p0[:, 2] = meas.depth_m
     initial = se3(meas.R_ned_body, p0)
 
@@ -483,11 +578,20 @@ def build_graph(
         config,
         yaw_increment_sigma_rad=yaw_inc_sigma,
         tilt_sigma_rad=ODOMETRY_TILT_FACTOR * vehicle.pitch_roll_sigma_rad,
+        scale_noise=not options.estimate_dvl,
     )
+    dvl = DvlModel.for_vehicle(vehicle) if options.estimate_dvl else None
+    J_odo = None
+    if dvl is not None or dvl_calibration is not None:
+        J_odo = odometry_sensitivity(inputs, times.t_s, meas.R_ned_body, times.is_image)
+    if dvl is None and dvl_calibration is not None:
+        T_odo[:, :3, 3] += J_odo @ dvl_calibration.c
 
     factors = _Factors()
     if compass.estimate:
         factors.add("prior", -1, compass.coefficient_prior())
+    if dvl is not None:
+        factors.add("prior", -1, dvl.prior())
     down = gtsam.Unit3(np.array([0.0, 0.0, 1.0]))
     tilt_noise = gtsam.noiseModel.Isotropic.Sigma(2, vehicle.pitch_roll_sigma_rad)
     for k in range(P):
@@ -592,4 +696,6 @@ def build_graph(
         compass=compass,
         compass_sigma_rad=heading_sigma,
         pose_graph=pose_graph,
+        dvl=dvl,
+        odometry_sensitivity=J_odo,
     )

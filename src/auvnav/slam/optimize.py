@@ -35,6 +35,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import gtsam
@@ -43,8 +44,9 @@ from numpy.typing import NDArray
 
 from auvnav.frames import FloatArray, rot2euler
 from auvnav.slam.compass import COEFFICIENTS_KEY
+from auvnav.slam.dvl import CALIBRATION_KEY
 from auvnav.slam.graph import SensorGraph, SlamOptions
-from auvnav.slam.online import OnlineRecord, replay
+from auvnav.slam.online import CalibratedOdometry, OnlineRecord, relinearize_thresholds, replay
 from auvnav.slam.pcm import LoopSelection, select_loops
 from auvnav.slam.poses import pose_key
 from auvnav.slam.solve import PoseGraphSolveError
@@ -55,6 +57,13 @@ log = logging.getLogger(__name__)
 #: The batch solve's robust kernel thresholds, in units of the final one: graduated from residuals of
 #: metres (dead reckoning's) down to the chi-square threshold.
 GRADUATED_SCALES = (64.0, 8.0, 1.0)
+#: With the DVL calibration estimated, the batch solve relinearises the odometry until no pose's
+#: rotation matrix or position changes by more than this between rounds (m), or this many rounds
+#: (:func:`lm_relinearized`).
+RELINEARIZED_TOLERANCE = 1e-4
+MAX_RELINEARIZATIONS = 5
+#: GTSAM's default relinearisation threshold of iSAM2, which ``--incremental`` keeps.
+ISAM2_RELINEARIZE_THRESHOLD = 0.1
 
 
 @dataclass(frozen=True)
@@ -68,6 +77,8 @@ class SlamSolution:
         The solution.
     coefficients_rad : ndarray, shape (2N+1,), or None
         The estimated deviation coefficients ``[a0, a1, b1, ...]``.
+    calibration : ndarray, shape (5,), or None
+        The estimated DVL calibration (:class:`auvnav.slam.dvl.DvlCalibration`'s ``c``).
     loop_chi2 : ndarray, shape (L,)
         Each used loop closure's chi-square at the solution.
     rejected : ndarray of int64
@@ -92,6 +103,7 @@ class SlamSolution:
     graph: SensorGraph
     T_ned_body: FloatArray
     coefficients_rad: FloatArray | None
+    calibration: FloatArray | None
     loop_chi2: FloatArray
     rejected: NDArray[np.int64]
     cost_before: float
@@ -105,7 +117,7 @@ class SlamSolution:
     online: OnlineRecord | None = None
 
     def values(self) -> gtsam.Values:
-        return self.graph.values(self.T_ned_body, self.coefficients_rad)
+        return self.graph.values(self.T_ned_body, self.coefficients_rad, self.calibration)
 
 
 def _lm(
@@ -172,30 +184,44 @@ def _isam2(
     params = gtsam.ISAM2Params()
     # Cholesky (no damping in iSAM2) reports an indeterminate system on dive graphs; QR does not.
     params.setFactorization("QR")
+    if sg.dvl is not None:
+        params.setRelinearizeThreshold(relinearize_thresholds(sg, ISAM2_RELINEARIZE_THRESHOLD))
     isam = gtsam.ISAM2(params)
     order = np.argsort(sg.last_pose, kind="stable")
     bounds = np.searchsorted(sg.last_pose[order], np.arange(-1, len(sg.times) + 1))
     P = len(sg.times)
     current = sg.initial[0]
     updates = 0
+    odometry = (
+        None
+        if sg.dvl is None
+        else CalibratedOdometry(sg, ISAM2_RELINEARIZE_THRESHOLD, params.relinearizeSkip)
+    )
     for first in range(0, P, poses_per_update):
         new_factors = gtsam.NonlinearFactorGraph()
         new_values = gtsam.Values()
         if first == 0:
-            for f in order[bounds[0] : bounds[1]]:  # the coefficients' prior
+            for f in order[bounds[0] : bounds[1]]:  # the priors of the other unknowns
                 new_factors.add(sg.factors[f])
-            if sg.compass.estimate:
-                new_values.insert(COEFFICIENTS_KEY, np.zeros(sg.compass.n_coefficients))
+            new_values.insert(sg.unknowns())
         last = min(first + poses_per_update, P) - 1
+        new_odometry = []
         for k in range(first, last + 1):
             if k > 0:
                 current = current @ sg.pose_graph.T_ij[k - 1]  # predict with the odometry
             new_values.insert(pose_key(k), gtsam.Pose3(current))
             for f in order[bounds[k + 1] : bounds[k + 2]]:
-                if not skip[f]:
+                if skip[f]:
+                    continue
+                if odometry is not None and sg.kinds[f] == "odometry":
+                    new_odometry.append(int(f))
+                else:
                     new_factors.add(sg.factors[f])
         try:
-            isam.update(new_factors, new_values)
+            if odometry is None:
+                isam.update(new_factors, new_values)
+            else:
+                odometry.update(isam, new_factors, new_values, new_odometry)
             current = isam.calculateEstimatePose3(pose_key(last)).matrix()
         except RuntimeError as err:
             raise PoseGraphSolveError(
@@ -203,7 +229,28 @@ def _isam2(
             ) from None
         updates += 1
     isam.update()
-    return isam.calculateEstimate(), updates
+    return isam.calculateBestEstimate(), updates
+
+
+def lm_relinearized(
+    build: Callable[[gtsam.Values], gtsam.NonlinearFactorGraph],
+    values: gtsam.Values,
+    max_iterations: int = 100,
+) -> tuple[gtsam.Values, int]:
+    """Levenberg-Marquardt (Cholesky, then QR: :func:`_lm_cholesky_then_qr`) on ``build(values)``, the
+    graph built again at each solution, until no pose's rotation matrix or position changes by more
+    than :data:`RELINEARIZED_TOLERANCE` (at most :data:`MAX_RELINEARIZATIONS` rounds): a graph whose
+    DVL odometry is linearised where it is built (:meth:`~auvnav.slam.graph.SensorGraph.odometry_at`)
+    is solved by Gauss-Newton on that odometry, two or three rounds. Returns the solution and the
+    iterations of all rounds."""
+    total = 0
+    for _ in range(MAX_RELINEARIZATIONS):
+        before = gtsam.utilities.extractPose3(values)
+        values, n = _lm_cholesky_then_qr([build(values)], values, max_iterations)
+        total += n
+        if np.max(np.abs(gtsam.utilities.extractPose3(values) - before)) < RELINEARIZED_TOLERANCE:
+            break
+    return values, total
 
 
 def solve(sg: SensorGraph, options: SlamOptions) -> SlamSolution:
@@ -241,12 +288,23 @@ def solve(sg: SensorGraph, options: SlamOptions) -> SlamSolution:
             sg.graph(options.robust, scale, drop_loops=drop) if scale != 1.0 else graph for scale in scales
         ]
         values, iterations = _lm_cholesky_then_qr(stages, values0, options.max_iterations)
+        if sg.dvl is not None:  # the final stage again, with the DVL calibration unknown
+            values, more = lm_relinearized(
+                lambda at: sg.graph(drop_loops=drop, linearized_at=at), values, options.max_iterations
+            )
+            iterations += more
         method = "lm"
     seconds = time.perf_counter() - start
     T = np.stack([values.atPose3(pose_key(k)).matrix() for k in range(len(sg.times))])
     x = values.atVector(COEFFICIENTS_KEY) if sg.compass.estimate else None
+    c = values.atVector(CALIBRATION_KEY) if sg.dvl is not None else None
     is_loop = np.array([kind == "loop" for kind in sg.kinds])
-    chi2 = np.array([2.0 * f.error(values) for f in sg.plain])
+    plain = [
+        sg.calibrated_odometry(f, c) if c is not None and kind == "odometry" else factor
+        for f, (factor, kind) in enumerate(zip(sg.plain, sg.kinds, strict=True))
+    ]
+    chi2 = np.array([2.0 * f.error(values) for f in plain])
+    at_solution = graph if c is None else sg.graph(drop_loops=drop, calibration=c)
     loop_chi2 = chi2[is_loop]
     over = np.sqrt(loop_chi2) > sg.loop_k if options.robust != "none" else np.zeros(len(loop_chi2), bool)
     if drop is not None:
@@ -256,10 +314,11 @@ def solve(sg: SensorGraph, options: SlamOptions) -> SlamSolution:
         graph=sg,
         T_ned_body=T,
         coefficients_rad=None if x is None else np.asarray(x, dtype=float),
+        calibration=None if c is None else np.asarray(c, dtype=float),
         loop_chi2=loop_chi2,
         rejected=rejected,
         cost_before=cost_before,
-        cost_after=2.0 * float(graph.error(values)),
+        cost_after=2.0 * float(at_solution.error(values)),
         chi2_after=float(chi2.sum() - loop_chi2[over].sum()),
         iterations=iterations,
         seconds=seconds,
@@ -295,6 +354,8 @@ class PoseMarginals:
         1-sigma heading (rotation about the vertical), radians.
     coefficients_covariance : ndarray, shape (2N+1, 2N+1), or None
         Of the estimated deviation coefficients, rad^2.
+    calibration_covariance : ndarray, shape (5, 5), or None
+        Of the estimated DVL calibration.
     computed : int
         Poses whose marginal was computed (the others interpolated).
     """
@@ -302,6 +363,7 @@ class PoseMarginals:
     sigma_ned_m: FloatArray
     sigma_yaw_rad: FloatArray
     coefficients_covariance: FloatArray | None
+    calibration_covariance: FloatArray | None
     computed: int
 
 
@@ -320,8 +382,9 @@ def marginals(solution: SlamSolution, every: int = 1) -> PoseMarginals:
     """
     sg = solution.graph
     P = len(sg.times)
-    graph = sg.graph(drop_loops=np.isin(sg.loop_rows, solution.rejected))
-    linear = graph.linearize(solution.values())
+    values = solution.values()
+    graph = sg.graph(drop_loops=np.isin(sg.loop_rows, solution.rejected), linearized_at=values)
+    linear = graph.linearize(values)
     try:
         # QR, not gtsam.Marginals' Cholesky: with thousands of millimetre-precise visual loop
         # closures beside metre-precise GPS fixes, Cholesky's pivots lose their precision and GTSAM
@@ -343,7 +406,8 @@ def marginals(solution: SlamSolution, every: int = 1) -> PoseMarginals:
     t = sg.times.t_s
     sigma_ned = np.stack([np.interp(t, t[rows], sig_p[:, c]) for c in range(3)], -1)
     cov_x = _marginal_covariance(m, COEFFICIENTS_KEY) if sg.compass.estimate else None
-    return PoseMarginals(sigma_ned, np.interp(t, t[rows], sig_y), cov_x, len(rows))
+    cov_c = _marginal_covariance(m, CALIBRATION_KEY) if sg.dvl is not None else None
+    return PoseMarginals(sigma_ned, np.interp(t, t[rows], sig_y), cov_x, cov_c, len(rows))
 
 
 def _marginal_covariance(tree: gtsam.GaussianBayesTree, key: int) -> FloatArray:

@@ -41,7 +41,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2 as chi2_distribution
 
-from auvnav.frames import FloatArray
+from auvnav.frames import FloatArray, skew
 from auvnav.slam.g2o import PoseGraph
 
 #: Loop closures tested against a loop closure: its nearest ones in pose-index space.
@@ -94,20 +94,13 @@ class LoopSelection:
         }
 
 
-def _skew(v: FloatArray) -> FloatArray:
-    S = np.zeros((*v.shape[:-1], 3, 3))
-    S[..., 0, 1], S[..., 0, 2], S[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    S[..., 1, 0], S[..., 2, 0], S[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    return S
-
-
 def adjoint(T: FloatArray) -> FloatArray:
     """GTSAM's Pose3 adjoint (tangent rotation first): ``[[R, 0], [t^ R, R]]``, shape (..., 6, 6)."""
     R, t = T[..., :3, :3], T[..., :3, 3]
     A = np.zeros((*T.shape[:-2], 6, 6))
     A[..., :3, :3] = R
     A[..., 3:, 3:] = R
-    A[..., 3:, :3] = _skew(t) @ R
+    A[..., 3:, :3] = skew(t) @ R
     return A
 
 

@@ -17,6 +17,7 @@ from auvnav.dive import Dive
 from auvnav.errors import ConfigError
 from auvnav.nav.inputs import nav_inputs
 from auvnav.slam.compass import CompassModel
+from auvnav.slam.dvl import DvlCalibration
 from auvnav.slam.graph import SensorGraph, SlamOptions, build_graph
 from auvnav.slam.optimize import PoseMarginals, SlamSolution, marginals, solution_trajectory, solve
 from auvnav.slam.poses import build_pose_times
@@ -39,6 +40,8 @@ class SlamResult:
         The image poses.
     deviation : DeviationModel or None
         The estimated compass correction (``--estimate-compass``).
+    dvl_calibration : DvlCalibration or None
+        The DVL odometry's calibration estimated in the graph (``--estimate-dvl``).
     options : SlamOptions
     loops_file, compass_correction, tide : str or None
         The inputs used, as given.
@@ -51,6 +54,7 @@ class SlamResult:
     sigmas: PoseMarginals | None
     trajectory: Trajectory
     deviation: DeviationModel | None
+    dvl_calibration: DvlCalibration | None
     options: SlamOptions
     loops_file: str | None = None
     compass_correction: str | None = None
@@ -102,6 +106,7 @@ class SlamResult:
             },
             "factors": sg.factor_counts(),
             "compass": compass,
+            "dvl": None if self.dvl_calibration is None else self.dvl_calibration.summary(),
             "tide": self.tide,
             "solver": sol.method,
             "robust": sol.robust,
@@ -123,12 +128,16 @@ def sensor_graph(
     loops: LoopClosures | None = None,
     correction: DeviationModel | None = None,
     tide: TideModel | None = None,
+    dvl_calibration: DvlCalibration | None = None,
     options: SlamOptions,
     loops_name: str = "loops",
 ) -> SensorGraph:
-    """A dive's sensor graph, unsolved (:func:`slam`'s parameters)."""
+    """A dive's sensor graph, unsolved (:func:`slam`'s parameters; ``dvl_calibration`` a fixed
+    calibration of the DVL odometry, :func:`auvnav.slam.graph.build_graph`)."""
     if correction is not None and options.estimate_compass:
         raise ConfigError("give --compass-correction or --estimate-compass, not both")
+    if dvl_calibration is not None and options.estimate_dvl:
+        raise ConfigError("give a DVL calibration or estimate it, not both")
     if loops is not None:
         check_loops(loops, len(image_t_s), loops_name)
     inputs = nav_inputs(dive, None if options.estimate_compass else correction)
@@ -141,7 +150,10 @@ def sensor_graph(
         harmonics=options.harmonics,
         a0_prior_sigma_rad=dive.vehicle.heading_sigma_rad,
     )
-    return build_graph(dive, inputs, times, loops, compass, options=options, tide=tide, loops_name=loops_name)
+    return build_graph(
+        dive, inputs, times, loops, compass,
+        options=options, tide=tide, dvl_calibration=dvl_calibration, loops_name=loops_name,
+    )  # fmt: skip
 
 
 def slam(
@@ -195,12 +207,17 @@ def slam(
     if solution.coefficients_rad is not None:
         cov = None if sigmas is None else sigmas.coefficients_covariance
         deviation = compass.estimated_model(solution.coefficients_rad, cov)
+    calibration = None
+    if solution.calibration is not None:
+        cov = None if sigmas is None else sigmas.calibration_covariance
+        calibration = DvlCalibration(solution.calibration, cov, dive.vehicle.dvl.R_body_sensor)
     return SlamResult(
         name=dive.info.name,
         solution=solution,
         sigmas=sigmas,
         trajectory=solution_trajectory(solution, sigmas),
         deviation=deviation,
+        dvl_calibration=calibration,
         options=options,
         loops_file=names.get("loops_file"),
         compass_correction=names.get("compass_correction"),

@@ -9,7 +9,8 @@ Products (DESIGN section 6), in ``DIVE/products/slam/``:
 - ``graph.g2o``: every pose of the graph (auxiliary ones included) at the solution, with the DVL
   odometry and the loop closures used as ``EDGE_SE3:QUAT`` records (:func:`auvnav.slam.g2o.write_g2o`;
   the unary factors, compass, attitude, depth and fixes, have no g2o record);
-- ``summary.json``: :meth:`~auvnav.slam.result.SlamResult.summary`;
+- ``summary.json``: :meth:`~auvnav.slam.result.SlamResult.summary` (with ``estimate_dvl``, ``dvl``:
+  the DVL odometry's calibration estimated in the graph, :mod:`auvnav.slam.dvl`);
 - ``online.csv`` with ``--online``: each image pose as the vehicle knew it when the iSAM2 update
   that added it finished (:mod:`auvnav.slam.online`), columns as ``trajectory.csv`` without sigmas;
   ``trajectory.csv`` is then the smoother's estimate after the last update. A vehicle runs it with
@@ -53,6 +54,9 @@ class SlamSettings:
     estimate_compass: bool = setting(
         False, "Estimate the deviation (eq. 5) in the graph; writes products/slam/correction.yaml."
     )
+    estimate_dvl: bool = setting(
+        False, "Estimate the DVL odometry's scale, mounting and the images' time offset in the graph."
+    )
     incremental: bool = setting(False, "iSAM2 (a vehicle's solver), not batch Levenberg-Marquardt.")
     poses_per_update: int | None = setting(
         None,
@@ -92,6 +96,7 @@ class SlamSettings:
             else math.radians(self.compass_sigma_deg),
             estimate_compass=self.estimate_compass,
             harmonics=self.harmonics,
+            estimate_dvl=self.estimate_dvl,
             robust=self.robust,
             loop_selection=self.loop_selection,
             incremental=self.incremental,
@@ -224,6 +229,13 @@ def format_summary(summary: dict[str, Any]) -> str:
         lines.append(
             f"estimated deviation: a0 {compass['a0_deg']:.3f} deg ({compass['constant_source']}), "
             f"a [{a}], b [{b}] deg"
+        )
+    dvl = summary.get("dvl")
+    if dvl:
+        roll, pitch, yaw = dvl["misalignment_rpy_deg"]
+        lines.append(
+            f"DVL calibration (estimated): scale factor {100 * dvl['scale_factor']:+.3f}%, mounting roll "
+            f"{roll:+.3f} pitch {pitch:+.3f} yaw {yaw:+.3f} deg, images' time offset {dvl['time_offset_s']:+.3f} s"
         )
     online = summary.get("online")
     if online:

@@ -58,8 +58,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from auvnav.frames import se3, se3_inverse
-from auvnav.vision.registration import Registration, _skew, expm_so3
+from auvnav.frames import se3, se3_inverse, skew
+from auvnav.vision.registration import Registration, expm_so3
 from auvnav.vision.stereo import StereoFeatures
 
 FloatArray = NDArray[np.float64]
@@ -618,7 +618,7 @@ def refine(A: Prepared, B: Prepared, T0: FloatArray, settings: DirectSettings) -
     cov[np.ix_(TILT, IN_PLANE)] = (K @ cov_tilt).T
     # about the pivot -> about A's camera: dt = dt_pivot - [t - pivot]x dtheta
     G = np.eye(6)
-    G[:3, 3:] = -_skew(t - pivot)
+    G[:3, 3:] = -skew(t - pivot)
     n_pix = int(inside.sum())
     return Refined(
         se3(R, t),

@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
-from auvnav.frames import se3
+from auvnav.frames import se3, skew
 from auvnav.vision.features import Vocabulary, match_by_word, mutual_matches, squared_distances
 from auvnav.vision.stereo import StereoFeatures
 
@@ -154,20 +154,11 @@ class Registration:
     normalised_residual: float
 
 
-def _skew(v: FloatArray) -> FloatArray:
-    """Cross-product matrices of vectors (..., 3) -> (..., 3, 3)."""
-    K = np.zeros((*v.shape[:-1], 3, 3))
-    K[..., 0, 1], K[..., 0, 2] = -v[..., 2], v[..., 1]
-    K[..., 1, 0], K[..., 1, 2] = v[..., 2], -v[..., 0]
-    K[..., 2, 0], K[..., 2, 1] = -v[..., 1], v[..., 0]
-    return K
-
-
 def expm_so3(w: FloatArray) -> FloatArray:
     """Rodrigues' formula: rotation matrices (..., 3, 3) of rotation vectors (..., 3)."""
     w = np.asarray(w, dtype=float)
     theta = np.linalg.norm(w, axis=-1)[..., None, None]
-    K = _skew(w)
+    K = skew(w)
     small = theta < 1e-12
     th = np.where(small, 1.0, theta)
     a = np.where(small, 1.0, np.sin(th) / th)
@@ -233,7 +224,7 @@ def _normal_equations(
 ) -> tuple[FloatArray, FloatArray]:
     """``H = sum w J^T W J`` and ``g = sum w J^T W r`` with ``J = dr/d(dt, dtheta) = [-I, [R b]x]``."""
     n = len(b)
-    J = np.concatenate([-np.broadcast_to(np.eye(3), (n, 3, 3)), _skew(b @ R.T)], axis=2)
+    J = np.concatenate([-np.broadcast_to(np.eye(3), (n, 3, 3)), skew(b @ R.T)], axis=2)
     WJ = (W @ J) * w[:, None, None]
     H = J.reshape(3 * n, 6).T @ WJ.reshape(3 * n, 6)
     g = WJ.reshape(3 * n, 6).T @ r.reshape(3 * n)
