@@ -26,6 +26,7 @@ from auvnav.nav.synthetic import legs_motion, synthetic_dive
 from auvnav.slam.dvl import CALIBRATION_KEY, DvlCalibration, linearized_odometry, odometry_sensitivity
 from auvnav.slam.graph import dvl_odometry
 from auvnav.slam.poses import pose_key, pose_measurements
+from auvnav.slam.stage import format_summary
 from auvnav.vehicle import Mount, Vehicle
 
 GEOMETRY = ["--headings", "4", "--leg-m", "8", "--grid-m", "2"]
@@ -196,6 +197,9 @@ def test_batch_slam_recovers_an_injected_scale_and_misalignment(injected: dict) 
     assert dvl["time_offset_s"] == pytest.approx(-0.05, abs=0.005)
     assert abs(scores["dvl_time_offset_error_s"]) < 0.005
     assert scores["ate_aligned_rmse_m"] < without["ate_aligned_rmse_m"] / 4
+    printed = [line for line in format_summary(result["summary"]).splitlines() if line.startswith("DVL")]
+    sigma = 100 * dvl["sigma"]["scale_factor"]
+    assert printed and f"scale factor {100 * dvl['scale_factor']:+.3f} +- {sigma:.3f}%" in printed[0]
 
 
 def test_online_slam_learns_the_calibration(injected: dict, tmp_path: Path) -> None:

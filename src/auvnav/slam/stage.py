@@ -232,10 +232,19 @@ def format_summary(summary: dict[str, Any]) -> str:
         )
     dvl = summary.get("dvl")
     if dvl:
-        roll, pitch, yaw = dvl["misalignment_rpy_deg"]
+        sigma = dvl.get("sigma")
+
+        def pm(value: float, key: str, index: int | None = None, unit: float = 1.0, fmt: str = ".3f") -> str:
+            if not sigma:
+                return f"{unit * value:+{fmt}}"
+            s = sigma[key] if index is None else sigma[key][index]
+            return f"{unit * value:+{fmt}} +- {unit * s:{fmt}}"
+
+        rpy = [pm(v, "misalignment_rpy_deg", i) for i, v in enumerate(dvl["misalignment_rpy_deg"])]
         lines.append(
-            f"DVL calibration (estimated): scale factor {100 * dvl['scale_factor']:+.3f}%, mounting roll "
-            f"{roll:+.3f} pitch {pitch:+.3f} yaw {yaw:+.3f} deg, images' time offset {dvl['time_offset_s']:+.3f} s"
+            f"DVL calibration (estimated): scale factor {pm(dvl['scale_factor'], 'scale_factor', unit=100)}%, "
+            f"mounting roll {rpy[0]} pitch {rpy[1]} yaw {rpy[2]} deg, "
+            f"images' time offset {pm(dvl['time_offset_s'], 'time_offset_s', fmt='.4f')} s"
         )
     online = summary.get("online")
     if online:
