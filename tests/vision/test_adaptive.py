@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -51,6 +53,27 @@ def test_stretch_reaches_the_target_on_a_low_contrast_image(textured) -> None:
     h, w = faint.shape
     cells = np.unique((kp.uv_px[:, 1] * 8 // h) * 8 + kp.uv_px[:, 0] * 8 // w)
     assert len(cells) >= 0.9 * 64
+
+
+def _rows(kp) -> np.ndarray:
+    rows = np.column_stack([kp.uv_px, kp.size_px, kp.descriptors])
+    return rows[np.lexsort(rows.T[::-1])]
+
+
+@pytest.mark.parametrize(("divide", "retried"), [(1.0, False), (4.5, False), (6.0, True)])
+def test_one_pass_keeps_what_a_pass_at_each_threshold_finds(textured, divide: float, retried: bool) -> None:
+    """The retry's single pass at half the threshold gives exactly the keypoints of a pass at the full
+    threshold when that finds enough (the textured image; at 2/9 of its contrast 195 of the lower
+    pass's 300, the rest dropped), else those of a pass at half (at a sixth, 7 against 300)."""
+    image = np.clip(np.rint(128 + (textured.astype(float) - 128) / divide), 0, 255).astype(np.uint8)
+    settings = FeatureSettings(
+        max_features=300, contrast_threshold=0.02, contrast_target_dn=0.0, retry_fraction=0.5, spread_cells=0
+    )
+    full = detect(image, replace(settings, retry_fraction=0.0))
+    half = detect(image, replace(settings, retry_fraction=0.0, contrast_threshold=0.01))
+    assert (len(full.uv_px) < 150) == retried and len(half.uv_px) == 300
+    assert len(full.uv_px) < 300 or divide == 1
+    np.testing.assert_array_equal(_rows(detect(image, settings)), _rows(half if retried else full))
 
 
 def test_spread_takes_each_cells_strongest_first() -> None:
