@@ -76,8 +76,9 @@ class FeatureSettings:
         check dive in turbid water, 14% of the images had fewer than 1,000 keypoints (370-807) at 0.02;
         all but one reached 1,500 at 0.01. SIFT runs once, at the lower threshold, and the keypoints
         above the full one are kept when there are enough: the keypoints and descriptors of a pass at
-        each threshold (identical on 120 images of the three waters), in 0.55 times the time on turbid
-        images, where nearly all need the lower threshold, and 0.96 in clear water. 0: one threshold.
+        each threshold (identical on 120 images of the three waters); a pair's features took 0.91-0.93
+        times the CPU of two passes on the check dive's clear and coastal images (where a third of the
+        images need the lower threshold), the same on its turbid ones. 0: one threshold.
     edge_reject_px : float
         Edge-safe stereo: a match is dropped when its disparity moves by more than this, pixels of the
         image SIFT runs on, as the tracked window is shifted by half its side
