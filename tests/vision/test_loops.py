@@ -155,3 +155,40 @@ def test_without_navigation_the_command_says_what_to_run(tiny_dive, tmp_path: Pa
     shutil.copytree(tiny_dive.path, copy, ignore=shutil.ignore_patterns("products"))
     assert main(["loops", str(copy), "-q"]) == 1
     assert "run `auvnav navigate` first" in capsys.readouterr().err
+
+
+def test_the_prior_through_a_registered_loop_is_exact_when_each_pass_is() -> None:
+    """Two passes half a metre apart in opposite directions, the second misplaced by the navigation
+    (turned 3 degrees and shifted 36 cm: what a compass deviation leaves); with the loop (5, 34)
+    registered, the pair (7, 32) is placed through it to the truth, with the sigma of two 1 m legs
+    of dead reckoning and the loop, and the nearer of two loops is the one used."""
+    from auvnav.frames import rot_z, se3, se3_inverse
+    from auvnav.vision.loops import (
+        SHORT_DRIFT_FRACTION,
+        SHORT_SIGMA_FLOOR_M,
+        Verification,
+        _anchored,
+        path_turn,
+    )
+    from auvnav.vision.loops import pose6 as to_pose6
+
+    k = np.arange(40)
+    first = k < 20
+    yaw = np.where(first, 0.0, np.pi)
+    p = np.column_stack([np.where(first, 0.5 * k, 0.5 * (39 - k)), np.where(first, 0.0, 0.5), np.zeros(40)])
+    T_true = se3(rot_z(yaw), p)
+    misplace = se3(rot_z(np.radians(3.0)), np.array([0.3, -0.2, 0.0]))
+    T_raw = np.where(first[:, None, None], T_true, misplace @ T_true)
+    path = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(T_raw[:, :3, 3], axis=0), axis=1))])
+
+    def loop(c: int, d: int, sigma: float) -> Verification:
+        pose = to_pose6(se3_inverse(T_true[c]) @ T_true[d])
+        return Verification(c, d, True, "", pose, np.eye(6) * sigma**2, 100, 80, 1.0)
+
+    anchors = [loop(15, 24, 0.001), loop(5, 34, 0.002)]
+    T, sigma = _anchored(np.array([7]), np.array([32]), anchors, T_raw, np.eye(4), path, path_turn(yaw))
+    truth = se3_inverse(T_true[7]) @ T_true[32]
+    assert np.linalg.norm((se3_inverse(T_raw[7]) @ T_raw[32])[:3, 3] - truth[:3, 3]) > 0.2
+    np.testing.assert_allclose(T[0], truth, atol=1e-9)
+    leg = SHORT_SIGMA_FLOOR_M**2 + SHORT_DRIFT_FRACTION**2  # a 1 m leg's variance
+    assert sigma[0] == pytest.approx(np.sqrt(2 * leg + 2 * 0.002**2 + 0.002**2), rel=1e-9)

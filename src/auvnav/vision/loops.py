@@ -16,7 +16,10 @@
    prior's uncertainty, the relative heading within ``max_heading_disagreement_rad`` of the compass's.
    A pair whose features do not register (too few repeat: featureless sand, ripple fields, turbid
    water) is registered again from its images, photometrically (:mod:`auvnav.vision.direct`), when
-   ``LoopSettings.direct`` is set.
+   ``LoopSettings.direct`` is set, searched for within the prior's window: the prior through a loop
+   already registered from features nearby along both tracks when that is the more certain
+   (:func:`_anchored`: the loop ties the two passes' headings), and a pair refused for want of a
+   certain prior is searched again when a loop found since makes its prior twice as certain.
 
 ``loops.csv`` (DESIGN section 6), one row per accepted pair, consecutive pairs included:
 
@@ -47,6 +50,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 from scipy.stats import chi2
 
 from auvnav import products as P
@@ -556,10 +560,15 @@ def find_loops(
     done = 0
     total = 0
     reused = 0
+    searched: dict[tuple[int, int], float] = {}  # each tested pair's direct search sigma
     while todo and rounds < settings.max_rounds:
         rounds += 1
         total += len(todo)
-        work = _work_items(todo, usable, files, pri, drift, fp_u, T_body_cam(rig), salt, turned, path)
+        anchors = _anchors(tested)
+        work = _work_items(
+            todo, usable, files, pri, drift, fp_u, T_body_cam(rig), salt, turned, path, anchors
+        )
+        searched.update(((w[0], w[1]), w[7]) for w in work)
         cached = [_from_cache(w[0], w[1], verified[w[-1]]) for w in work if w[-1] in verified]
         fresh = [w for w in work if w[-1] not in verified]
         reused += len(cached)
@@ -578,6 +587,24 @@ def find_loops(
         ci, cj, _ = candidate_pairs(fp_u, drift, settings.candidates, exclude=set(tested))
         # Verified in image order: a worker's chunk then shares feature files (its cache).
         todo = sorted(_limit_per_image(ci, cj, settings.per_image_per_round))
+        if settings.direct is not None:
+            again = _searched_again(
+                tested,
+                searched,
+                _anchors(tested),
+                usable,
+                files,
+                pri,
+                drift,
+                fp_u,
+                T_body_cam(rig),
+                salt,
+                turned,
+                path,
+            )
+            for pair in again:
+                del tested[pair]
+            todo = sorted(set(todo) | set(again))
     if todo:
         log.warning("stopped after %d rounds with %d candidates untested", rounds, len(todo))
     # Back to image rows.
@@ -643,6 +670,7 @@ def _work_items(
     salt: bytes,
     turns: Callable[[NDArray[np.intp], NDArray[np.intp]], FloatArray],
     path_m: FloatArray,
+    anchors: list[Verification] | None = None,
 ) -> list[WorkItem]:
     """Verification work: pairs with their feature files, two priors of the camera pose of j in i
     with their lateral uncertainties, and the key of the outcome in the verification cache.
@@ -655,7 +683,9 @@ def _work_items(
     drift model's knots are 20 s apart, its correction between them is a straight line, and it
     has a floor of its own. Both add the compass's heading error turning the displacement
     (:data:`HEADING_SIGMA_RAD` once the vehicle has turned a quarter turn or more between the
-    two images, in proportion below, :func:`path_turn`)."""
+    two images, in proportion below, :func:`path_turn`). With ``anchors`` (loops already registered
+    from features), the second prior is the one through the nearest of them when that is more
+    certain still (:func:`_anchored`)."""
     a = np.array([p[0] for p in pairs], dtype=np.intp)
     b = np.array([p[1] for p in pairs], dtype=np.intp)
     T_raw = se3(prior.R_ned_body, prior.p_ned_m) @ T_bc
@@ -671,6 +701,11 @@ def _work_items(
     near = short < drift_sigma
     T_near = np.where(near[:, None, None], se3_inverse(T_raw[a]) @ T_raw[b], T_ab)
     sigma_near = np.hypot(np.where(near, short, drift_sigma), heading)
+    if anchors:
+        T_anchor, sigma_anchor = _anchored(a, b, anchors, T_raw, T_bc, path_m, turns)
+        better = sigma_anchor < sigma_near
+        T_near = np.where(better[:, None, None], T_anchor, T_near)
+        sigma_near = np.where(better, sigma_anchor, sigma_near)
     out = []
     for k, (i, j) in enumerate(zip(a, b, strict=True)):
         fi, fj = files[int(usable[i])], files[int(usable[j])]
@@ -701,6 +736,60 @@ SHORT_DRIFT_FRACTION = 0.01
 #: turn or more between them: the compass's deviation differs from heading to heading by degrees
 #: (paper section II-C), and the same heading error is shared by images on one straight leg.
 HEADING_SIGMA_RAD = 0.1
+
+
+#: Loop closures through which :func:`_anchored` looks for a pair's prior, nearest first along the track.
+ANCHOR_NEIGHBOURS = 4
+
+
+def _anchored(
+    a: NDArray[np.intp],
+    b: NDArray[np.intp],
+    anchors: list[Verification],
+    T_raw: FloatArray,
+    T_bc: FloatArray,
+    path_m: FloatArray,
+    turns: Callable[[NDArray[np.intp], NDArray[np.intp]], FloatArray],
+) -> tuple[FloatArray, FloatArray]:
+    """The camera pose of b in a through a registered loop (c, d) near them along the track, and its
+    lateral 1-sigma (metres): the dead reckoning from a to c, the loop, the dead reckoning from d to
+    b (``T_raw``: camera poses of the uncorrected prior). Each leg has the short-baseline uncertainty
+    of :func:`_work_items` with its own heading term; the loop adds its covariance and its yaw's
+    share over the second leg. The loop ties the two passes' headings, which the drift model's prior
+    does not: a pair on a ripple field, whose crests repeat a few centimetres apart, is searched in a
+    window of a centimetre or two instead of the drift model's ten or more. Of the
+    :data:`ANCHOR_NEIGHBOURS` loops nearest (a, b) along the track, the most certain."""
+    c = np.array([v.i for v in anchors], dtype=np.intp)
+    d = np.array([v.j for v in anchors], dtype=np.intp)
+    cov = np.array([v.cov6 for v in anchors])
+    loop_sigma = np.sqrt(cov[:, 0, 0] + cov[:, 1, 1])
+    yaw_sigma = np.sqrt(cov[:, 5, 5])
+    tree = cKDTree(np.column_stack([path_m[c], path_m[d]]))
+    k = min(ANCHOR_NEIGHBOURS, len(anchors))
+    _, nearest = tree.query(np.column_stack([path_m[a], path_m[b]]), k=k)
+    nearest = nearest.reshape(len(a), k)
+
+    def leg(x: NDArray[np.intp], y: NDArray[np.intp]) -> tuple[FloatArray, FloatArray]:
+        length = np.abs(path_m[y] - path_m[x])
+        heading = HEADING_SIGMA_RAD * np.minimum(1.0, turns(np.minimum(x, y), np.maximum(x, y)) / (np.pi / 2))
+        return length, np.sqrt(
+            SHORT_SIGMA_FLOOR_M**2 + (SHORT_DRIFT_FRACTION * length) ** 2 + (heading * length) ** 2
+        )
+
+    sigmas = np.empty((len(a), k))
+    for n in range(k):
+        m = nearest[:, n]
+        _, first = leg(a, c[m])
+        second_length, second = leg(d[m], b)
+        sigmas[:, n] = np.sqrt(
+            first**2 + second**2 + loop_sigma[m] ** 2 + (yaw_sigma[m] * second_length) ** 2
+        )
+    best = np.argmin(sigmas, axis=1)
+    m = nearest[np.arange(len(a)), best]
+    T_cd = np.array([se3(euler2rot(p[5], p[4], p[3]), p[:3]) for p in (anchors[q].pose6 for q in m)])
+    T_cd_cam = se3_inverse(T_bc) @ T_cd @ T_bc
+    T = se3_inverse(T_raw[a]) @ T_raw[c[m]] @ T_cd_cam @ se3_inverse(T_raw[d[m]]) @ T_raw[b]
+    return T, sigmas[np.arange(len(a)), best]
 
 
 def path_turn(yaw_rad: FloatArray) -> Callable[[NDArray[np.intp], NDArray[np.intp]], FloatArray]:
@@ -742,6 +831,42 @@ def _limit_per_image(i: NDArray[np.intp], j: NDArray[np.intp], cap: int) -> list
             count[a] = count.get(a, 0) + 1
             count[b] = count.get(b, 0) + 1
     return out
+
+
+def _anchors(tested: dict[tuple[int, int], Verification]) -> list[Verification]:
+    """The loops registered from features so far, not between consecutive pairs: the anchors of
+    :func:`_anchored` (a loop from the images may have taken the wrong one of look-alike places, and
+    a prior through it would lead its neighbours to the same mistake)."""
+    return [v for v in tested.values() if v.accepted and not v.direct and v.j - v.i > 1]
+
+
+#: The direct registration's refusals that a more certain prior may overturn.
+PRIOR_LIMITED = ("prior too uncertain", "ambiguous", "best correlation at the edge", "no refinement stayed")
+#: A refused pair is searched again when a loop found since makes its prior this much more certain.
+SEARCH_AGAIN_RATIO = 0.5
+
+
+def _searched_again(
+    tested: dict[tuple[int, int], Verification],
+    searched: dict[tuple[int, int], float],
+    anchors: list[Verification],
+    *args: Any,
+) -> list[tuple[int, int]]:
+    """Pairs the direct registration refused for want of a certain prior whose prior through the
+    loops found since (``anchors``, :func:`_anchored`) is :data:`SEARCH_AGAIN_RATIO` times as
+    uncertain or less than the one they were searched with (``searched``); ``args``: the rest of
+    :func:`_work_items`' arguments."""
+    if not anchors:
+        return []
+    refused = [
+        pair
+        for pair, v in tested.items()
+        if not v.accepted and v.reason.partition("; direct: ")[2].startswith(PRIOR_LIMITED)
+    ]
+    if not refused:
+        return []
+    work = _work_items(refused, *args, anchors)
+    return [(w[0], w[1]) for w in work if w[7] < SEARCH_AGAIN_RATIO * searched[(w[0], w[1])]]
 
 
 def _refit(drift: DriftModel, fp: Footprints, tested: dict[tuple[int, int], Verification]) -> None:
