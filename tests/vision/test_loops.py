@@ -167,7 +167,7 @@ def test_the_prior_through_a_registered_loop_is_exact_when_each_pass_is() -> Non
         SHORT_DRIFT_FRACTION,
         SHORT_SIGMA_FLOOR_M,
         Verification,
-        _anchored,
+        _Priors,
         path_turn,
     )
     from auvnav.vision.loops import pose6 as to_pose6
@@ -186,7 +186,8 @@ def test_the_prior_through_a_registered_loop_is_exact_when_each_pass_is() -> Non
         return Verification(c, d, True, "", pose, np.eye(6) * sigma**2, 100, 80, 1.0)
 
     anchors = [loop(15, 24, 0.001), loop(5, 34, 0.002)]
-    T, sigma = _anchored(np.array([7]), np.array([32]), anchors, T_raw, np.eye(4), path, path_turn(yaw))
+    priors = _Priors(None, None, np.eye(4), T_raw, None, path_turn(yaw), path)  # what `anchored` reads
+    T, sigma = priors.anchored(np.array([7]), np.array([32]), anchors)
     truth = se3_inverse(T_true[7]) @ T_true[32]
     assert np.linalg.norm((se3_inverse(T_raw[7]) @ T_raw[32])[:3, 3] - truth[:3, 3]) > 0.2
     np.testing.assert_allclose(T[0], truth, atol=1e-9)

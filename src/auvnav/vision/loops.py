@@ -18,7 +18,7 @@
    water) is registered again from its images, photometrically (:mod:`auvnav.vision.direct`), when
    ``LoopSettings.direct`` is set, searched for within the prior's window: the prior through a loop
    already registered from features nearby along both tracks when that is the more certain
-   (:func:`_anchored`: the loop ties the two passes' headings), and a pair refused for want of a
+   (:meth:`_Priors.anchored`: the loop ties the two passes' headings), and a pair refused for want of a
    certain prior is searched again when a loop found since makes its prior twice as certain.
 
 ``loops.csv`` (DESIGN section 6), one row per accepted pair, consecutive pairs included:
@@ -550,8 +550,15 @@ def find_loops(
     fp_u = footprints(pri, image_altitude(dive, t[usable], stereo=stereo), rig)
     steps = np.linalg.norm(np.diff(pri.p_ned_m[:, :2], axis=0), axis=1)  # horizontal, between images
     drift = DriftModel(pri.t_s, float(np.median(steps / np.diff(pri.t_s))), settings.candidates)
-    turned = path_turn(pri.yaw_rad)
-    path = np.concatenate([[0.0], np.cumsum(steps)])
+    priors = _Priors(
+        drift,
+        fp_u,
+        T_body_cam(rig),
+        se3(pri.R_ned_body, pri.p_ned_m) @ T_body_cam(rig),
+        pri,
+        path_turn(pri.yaw_rad),
+        np.concatenate([[0.0], np.cumsum(steps)]),
+    )
     # Work in positions within `usable` (u) and map back to image rows at the end.
     tested: dict[tuple[int, int], Verification] = {}
     consecutive = [(a, a + 1) for a in range(len(usable) - 1)]
@@ -560,14 +567,12 @@ def find_loops(
     done = 0
     total = 0
     reused = 0
+    anchors: list[Verification] = []
     searched: dict[tuple[int, int], float] = {}  # each tested pair's direct search sigma
     while todo and rounds < settings.max_rounds:
         rounds += 1
         total += len(todo)
-        anchors = _anchors(tested)
-        work = _work_items(
-            todo, usable, files, pri, drift, fp_u, T_body_cam(rig), salt, turned, path, anchors
-        )
+        work = _work_items(todo, usable, files, priors, salt, anchors)
         searched.update(((w[0], w[1]), w[7]) for w in work)
         cached = [_from_cache(w[0], w[1], verified[w[-1]]) for w in work if w[-1] in verified]
         fresh = [w for w in work if w[-1] not in verified]
@@ -584,24 +589,12 @@ def find_loops(
                     v = replace(v, accepted=False, reason=reason)
             tested[(v.i, v.j)] = v
         _refit(drift, fp_u, tested)
+        anchors = _anchors(tested)
         ci, cj, _ = candidate_pairs(fp_u, drift, settings.candidates, exclude=set(tested))
         # Verified in image order: a worker's chunk then shares feature files (its cache).
         todo = sorted(_limit_per_image(ci, cj, settings.per_image_per_round))
         if settings.direct is not None:
-            again = _searched_again(
-                tested,
-                searched,
-                _anchors(tested),
-                usable,
-                files,
-                pri,
-                drift,
-                fp_u,
-                T_body_cam(rig),
-                salt,
-                turned,
-                path,
-            )
+            again = _searched_again(tested, searched, priors, anchors)
             for pair in again:
                 del tested[pair]
             todo = sorted(set(todo) | set(again))
@@ -659,53 +652,121 @@ def _verification_salt(settings: LoopSettings, vocabulary: Vocabulary | None) ->
     return h.digest()
 
 
+@dataclass(frozen=True)
+class _Priors:
+    """Where the priors of a pair's relative pose come from (:meth:`of`).
+
+    ``drift`` is refitted in place after each round; ``T_raw``: the camera poses of the uncorrected
+    prior ``prior`` (``T_bc``: the camera in the body); ``turns``: :func:`path_turn` of its headings;
+    ``path_m``: distance along its track at each image."""
+
+    drift: DriftModel
+    fp: Footprints
+    T_bc: FloatArray
+    T_raw: FloatArray
+    prior: Trajectory
+    turns: Callable[[NDArray[np.intp], NDArray[np.intp]], FloatArray]
+    path_m: FloatArray
+
+    def heading_sigma(self, a: NDArray[np.intp], b: NDArray[np.intp]) -> FloatArray:
+        """The relative heading's 1-sigma between images a and b (either order):
+        :data:`HEADING_SIGMA_RAD` once the vehicle has turned a quarter turn or more between them, in
+        proportion below."""
+        return HEADING_SIGMA_RAD * np.minimum(
+            1.0, self.turns(np.minimum(a, b), np.maximum(a, b)) / (np.pi / 2)
+        )
+
+    def track_sigma(self, a: NDArray[np.intp], b: NDArray[np.intp]) -> FloatArray:
+        """The dead reckoning's relative 1-sigma over the track between images a and b, before its
+        heading's share (:data:`SHORT_SIGMA_FLOOR_M` and :data:`SHORT_DRIFT_FRACTION` of the distance)."""
+        return np.hypot(SHORT_SIGMA_FLOOR_M, SHORT_DRIFT_FRACTION * np.abs(self.path_m[b] - self.path_m[a]))
+
+    def of(
+        self, a: NDArray[np.intp], b: NDArray[np.intp], anchors: list[Verification]
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Two priors of the camera pose of b in a (pairs a < b), each with its lateral 1-sigma.
+
+        The first, for the features' guided matching, is the prior corrected by the drift model,
+        with the drift model's uncertainty. The second, for the direct registration's search window,
+        is the same, or, when the dead reckoning over the track between the two images is more
+        certain (:meth:`track_sigma`), the prior as it is with that uncertainty: the drift model's
+        knots are 20 s apart, its correction between them is a straight line, and it has a floor of
+        its own. Both add the compass's heading error turning the displacement
+        (:meth:`heading_sigma`). With ``anchors`` (loops already registered from features), the
+        second prior is the one through the nearest of them when that is more certain still
+        (:meth:`anchored`)."""
+        p_ned = self.prior.p_ned_m.copy()
+        p_ned[:, :2] += self.drift.correction(self.prior.t_s)
+        T = se3(self.prior.R_ned_body, p_ned) @ self.T_bc
+        T_ab = se3_inverse(T[a]) @ T[b]
+        drift_sigma = self.drift.relative_sigma(self.fp.t_s[a], self.fp.t_s[b])
+        short = self.track_sigma(a, b)
+        heading = self.heading_sigma(a, b) * np.linalg.norm(T_ab[:, :2, 3], axis=1)
+        sigma = np.hypot(drift_sigma, heading)
+        near = short < drift_sigma
+        T_near = np.where(near[:, None, None], se3_inverse(self.T_raw[a]) @ self.T_raw[b], T_ab)
+        sigma_near = np.hypot(np.where(near, short, drift_sigma), heading)
+        if anchors:
+            T_anchor, sigma_anchor = self.anchored(a, b, anchors)
+            better = sigma_anchor < sigma_near
+            T_near = np.where(better[:, None, None], T_anchor, T_near)
+            sigma_near = np.where(better, sigma_anchor, sigma_near)
+        return T_ab, sigma, T_near, sigma_near
+
+    def anchored(
+        self, a: NDArray[np.intp], b: NDArray[np.intp], anchors: list[Verification]
+    ) -> tuple[FloatArray, FloatArray]:
+        """The camera pose of b in a through a registered loop (c, d) near them along the track, and
+        its lateral 1-sigma (metres): the dead reckoning from a to c, the loop, the dead reckoning from
+        d to b. Each leg has the uncertainty of :meth:`track_sigma` and its heading's share of its
+        length; the loop adds its covariance and its yaw's share over the second leg. The loop ties
+        the two passes' headings, which the drift model's prior does not: a pair on a ripple field,
+        whose crests repeat a few centimetres apart, is searched in a window of a centimetre or two
+        instead of the drift model's ten or more. Of the :data:`ANCHOR_NEIGHBOURS` loops nearest
+        (a, b) along the track, the most certain."""
+        c = np.array([v.i for v in anchors], dtype=np.intp)
+        d = np.array([v.j for v in anchors], dtype=np.intp)
+        cov = np.array([v.cov6 for v in anchors])
+        loop_sigma = np.sqrt(cov[:, 0, 0] + cov[:, 1, 1])
+        yaw_sigma = np.sqrt(cov[:, 5, 5])
+        path = self.path_m
+        tree = cKDTree(np.column_stack([path[c], path[d]]))
+        k = min(ANCHOR_NEIGHBOURS, len(anchors))
+        _, nearest = tree.query(np.column_stack([path[a], path[b]]), k=k)
+        nearest = nearest.reshape(len(a), k)
+
+        def leg(x: NDArray[np.intp], y: NDArray[np.intp]) -> FloatArray:
+            return np.hypot(self.track_sigma(x, y), self.heading_sigma(x, y) * np.abs(path[y] - path[x]))
+
+        sigmas = np.empty((len(a), k))
+        for n in range(k):
+            m = nearest[:, n]
+            second = np.abs(path[b] - path[d[m]])
+            sigmas[:, n] = np.sqrt(
+                leg(a, c[m]) ** 2 + leg(d[m], b) ** 2 + loop_sigma[m] ** 2 + (yaw_sigma[m] * second) ** 2
+            )
+        best = np.argmin(sigmas, axis=1)
+        m = nearest[np.arange(len(a)), best]
+        T_cd = np.array([se3(euler2rot(p[5], p[4], p[3]), p[:3]) for p in (anchors[q].pose6 for q in m)])
+        T_cd_cam = se3_inverse(self.T_bc) @ T_cd @ self.T_bc
+        T_raw = self.T_raw
+        T = se3_inverse(T_raw[a]) @ T_raw[c[m]] @ T_cd_cam @ se3_inverse(T_raw[d[m]]) @ T_raw[b]
+        return T, sigmas[np.arange(len(a)), best]
+
+
 def _work_items(
     pairs: list[tuple[int, int]],
     usable: NDArray[np.intp],
     files: dict[int, str],
-    prior: Trajectory,
-    drift: DriftModel,
-    fp: Footprints,
-    T_bc: FloatArray,
+    priors: _Priors,
     salt: bytes,
-    turns: Callable[[NDArray[np.intp], NDArray[np.intp]], FloatArray],
-    path_m: FloatArray,
-    anchors: list[Verification] | None = None,
+    anchors: list[Verification],
 ) -> list[WorkItem]:
-    """Verification work: pairs with their feature files, two priors of the camera pose of j in i
-    with their lateral uncertainties, and the key of the outcome in the verification cache.
-
-    The first prior, for the features' guided matching, is the prior corrected by the drift model,
-    with the drift model's uncertainty. The second, for the direct registration's search window,
-    is the same, or, when the dead reckoning over the track between the two images is more certain
-    (``path_m``: distance along the prior's track at each image; :data:`SHORT_SIGMA_FLOOR_M` and
-    :data:`SHORT_DRIFT_FRACTION` of the distance), the prior as it is with that uncertainty: the
-    drift model's knots are 20 s apart, its correction between them is a straight line, and it
-    has a floor of its own. Both add the compass's heading error turning the displacement
-    (:data:`HEADING_SIGMA_RAD` once the vehicle has turned a quarter turn or more between the
-    two images, in proportion below, :func:`path_turn`). With ``anchors`` (loops already registered
-    from features), the second prior is the one through the nearest of them when that is more
-    certain still (:func:`_anchored`)."""
+    """Verification work: pairs with their feature files, their two priors (:meth:`_Priors.of`) and
+    the key of the outcome in the verification cache."""
     a = np.array([p[0] for p in pairs], dtype=np.intp)
     b = np.array([p[1] for p in pairs], dtype=np.intp)
-    T_raw = se3(prior.R_ned_body, prior.p_ned_m) @ T_bc
-    p_ned = prior.p_ned_m.copy()
-    p_ned[:, :2] += drift.correction(prior.t_s)
-    T = se3(prior.R_ned_body, p_ned) @ T_bc
-    T_ab = se3_inverse(T[a]) @ T[b]
-    drift_sigma = drift.relative_sigma(fp.t_s[a], fp.t_s[b])
-    short = np.hypot(SHORT_SIGMA_FLOOR_M, SHORT_DRIFT_FRACTION * np.abs(path_m[b] - path_m[a]))
-    heading = HEADING_SIGMA_RAD * np.minimum(1.0, turns(a, b) / (np.pi / 2))
-    heading = heading * np.linalg.norm(T_ab[:, :2, 3], axis=1)
-    sigma = np.hypot(drift_sigma, heading)
-    near = short < drift_sigma
-    T_near = np.where(near[:, None, None], se3_inverse(T_raw[a]) @ T_raw[b], T_ab)
-    sigma_near = np.hypot(np.where(near, short, drift_sigma), heading)
-    if anchors:
-        T_anchor, sigma_anchor = _anchored(a, b, anchors, T_raw, T_bc, path_m, turns)
-        better = sigma_anchor < sigma_near
-        T_near = np.where(better[:, None, None], T_anchor, T_near)
-        sigma_near = np.where(better, sigma_anchor, sigma_near)
+    T_ab, sigma, T_near, sigma_near = priors.of(a, b, anchors)
     out = []
     for k, (i, j) in enumerate(zip(a, b, strict=True)):
         fi, fj = files[int(usable[i])], files[int(usable[j])]
@@ -738,58 +799,9 @@ SHORT_DRIFT_FRACTION = 0.01
 HEADING_SIGMA_RAD = 0.1
 
 
-#: Loop closures through which :func:`_anchored` looks for a pair's prior, nearest first along the track.
+#: Loop closures through which :meth:`_Priors.anchored` looks for a pair's prior, nearest first along
+#: the track.
 ANCHOR_NEIGHBOURS = 4
-
-
-def _anchored(
-    a: NDArray[np.intp],
-    b: NDArray[np.intp],
-    anchors: list[Verification],
-    T_raw: FloatArray,
-    T_bc: FloatArray,
-    path_m: FloatArray,
-    turns: Callable[[NDArray[np.intp], NDArray[np.intp]], FloatArray],
-) -> tuple[FloatArray, FloatArray]:
-    """The camera pose of b in a through a registered loop (c, d) near them along the track, and its
-    lateral 1-sigma (metres): the dead reckoning from a to c, the loop, the dead reckoning from d to
-    b (``T_raw``: camera poses of the uncorrected prior). Each leg has the short-baseline uncertainty
-    of :func:`_work_items` with its own heading term; the loop adds its covariance and its yaw's
-    share over the second leg. The loop ties the two passes' headings, which the drift model's prior
-    does not: a pair on a ripple field, whose crests repeat a few centimetres apart, is searched in a
-    window of a centimetre or two instead of the drift model's ten or more. Of the
-    :data:`ANCHOR_NEIGHBOURS` loops nearest (a, b) along the track, the most certain."""
-    c = np.array([v.i for v in anchors], dtype=np.intp)
-    d = np.array([v.j for v in anchors], dtype=np.intp)
-    cov = np.array([v.cov6 for v in anchors])
-    loop_sigma = np.sqrt(cov[:, 0, 0] + cov[:, 1, 1])
-    yaw_sigma = np.sqrt(cov[:, 5, 5])
-    tree = cKDTree(np.column_stack([path_m[c], path_m[d]]))
-    k = min(ANCHOR_NEIGHBOURS, len(anchors))
-    _, nearest = tree.query(np.column_stack([path_m[a], path_m[b]]), k=k)
-    nearest = nearest.reshape(len(a), k)
-
-    def leg(x: NDArray[np.intp], y: NDArray[np.intp]) -> tuple[FloatArray, FloatArray]:
-        length = np.abs(path_m[y] - path_m[x])
-        heading = HEADING_SIGMA_RAD * np.minimum(1.0, turns(np.minimum(x, y), np.maximum(x, y)) / (np.pi / 2))
-        return length, np.sqrt(
-            SHORT_SIGMA_FLOOR_M**2 + (SHORT_DRIFT_FRACTION * length) ** 2 + (heading * length) ** 2
-        )
-
-    sigmas = np.empty((len(a), k))
-    for n in range(k):
-        m = nearest[:, n]
-        _, first = leg(a, c[m])
-        second_length, second = leg(d[m], b)
-        sigmas[:, n] = np.sqrt(
-            first**2 + second**2 + loop_sigma[m] ** 2 + (yaw_sigma[m] * second_length) ** 2
-        )
-    best = np.argmin(sigmas, axis=1)
-    m = nearest[np.arange(len(a)), best]
-    T_cd = np.array([se3(euler2rot(p[5], p[4], p[3]), p[:3]) for p in (anchors[q].pose6 for q in m)])
-    T_cd_cam = se3_inverse(T_bc) @ T_cd @ T_bc
-    T = se3_inverse(T_raw[a]) @ T_raw[c[m]] @ T_cd_cam @ se3_inverse(T_raw[d[m]]) @ T_raw[b]
-    return T, sigmas[np.arange(len(a)), best]
 
 
 def path_turn(yaw_rad: FloatArray) -> Callable[[NDArray[np.intp], NDArray[np.intp]], FloatArray]:
@@ -835,7 +847,7 @@ def _limit_per_image(i: NDArray[np.intp], j: NDArray[np.intp], cap: int) -> list
 
 def _anchors(tested: dict[tuple[int, int], Verification]) -> list[Verification]:
     """The loops registered from features so far, not between consecutive pairs: the anchors of
-    :func:`_anchored` (a loop from the images may have taken the wrong one of look-alike places, and
+    :meth:`_Priors.anchored` (a loop from the images may have taken the wrong one of look-alike places, and
     a prior through it would lead its neighbours to the same mistake)."""
     return [v for v in tested.values() if v.accepted and not v.direct and v.j - v.i > 1]
 
@@ -849,24 +861,24 @@ SEARCH_AGAIN_RATIO = 0.5
 def _searched_again(
     tested: dict[tuple[int, int], Verification],
     searched: dict[tuple[int, int], float],
+    priors: _Priors,
     anchors: list[Verification],
-    *args: Any,
 ) -> list[tuple[int, int]]:
     """Pairs the direct registration refused for want of a certain prior whose prior through the
-    loops found since (``anchors``, :func:`_anchored`) is :data:`SEARCH_AGAIN_RATIO` times as
-    uncertain or less than the one they were searched with (``searched``); ``args``: the rest of
-    :func:`_work_items`' arguments."""
-    if not anchors:
-        return []
+    loops found since (``anchors``, :meth:`_Priors.anchored`) is :data:`SEARCH_AGAIN_RATIO` times as
+    uncertain or less than the one they were searched with (``searched``)."""
     refused = [
         pair
         for pair, v in tested.items()
         if not v.accepted and v.reason.partition("; direct: ")[2].startswith(PRIOR_LIMITED)
     ]
-    if not refused:
+    if not anchors or not refused:
         return []
-    work = _work_items(refused, *args, anchors)
-    return [(w[0], w[1]) for w in work if w[7] < SEARCH_AGAIN_RATIO * searched[(w[0], w[1])]]
+    a, b = np.array(refused, dtype=np.intp).T
+    sigma_near = priors.of(a, b, anchors)[3]
+    return [
+        pair for pair, s in zip(refused, sigma_near, strict=True) if s < SEARCH_AGAIN_RATIO * searched[pair]
+    ]
 
 
 def _refit(drift: DriftModel, fp: Footprints, tested: dict[tuple[int, int], Verification]) -> None:
