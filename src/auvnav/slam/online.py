@@ -66,6 +66,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import gtsam
@@ -78,7 +79,7 @@ from auvnav.slam.dvl import CALIBRATION_KEY, N_CALIBRATION
 from auvnav.slam.graph import SensorGraph
 from auvnav.slam.pcm import LoopSelection, select_loops
 from auvnav.slam.poses import pose_key
-from auvnav.slam.solve import PoseGraphSolveError
+from auvnav.slam.solve import PoseGraphSolveError, one_line
 
 log = logging.getLogger(__name__)
 
@@ -193,6 +194,50 @@ class CalibratedOdometry:
         self._factor.extend(numbers)
         self._slot.extend(list(result.getNewFactorsIndices())[first:])
         self._poses += sum(1 for key in new_values.keys() if gtsam.Symbol(key).chr() == ord("x"))
+
+
+def isam2_update(
+    isam: gtsam.ISAM2,
+    sg: SensorGraph,
+    odometry: CalibratedOdometry | None,
+    factors: Iterable[int],
+    first: int,
+    last: int,
+    current: FloatArray,
+) -> FloatArray:
+    """One iSAM2 update of a sensor graph: poses ``first`` to ``last`` (with the graph's other unknowns
+    when ``first`` is 0), each predicted from the one before with its DVL odometry starting from
+    ``current`` (the estimate of pose ``first - 1``, or pose 0's initial guess), and ``factors``
+    (indices into ``sg.factors``), the DVL odometry through ``odometry`` when the DVL is calibrated in
+    the graph. Returns the estimates of poses ``first`` to ``last``, shape (n, 4, 4).
+
+    Raises
+    ------
+    PoseGraphSolveError
+        When iSAM2 fails.
+    """
+    new_factors = gtsam.NonlinearFactorGraph()
+    new_values = gtsam.Values()
+    if first == 0:
+        new_values.insert(sg.unknowns())
+    for k in range(first, last + 1):
+        if k > 0:
+            current = current @ sg.pose_graph.T_ij[k - 1]
+        new_values.insert(pose_key(k), gtsam.Pose3(current))
+    new_odometry = []
+    for f in factors:
+        if odometry is not None and sg.kinds[f] == "odometry":
+            new_odometry.append(int(f))
+        else:
+            new_factors.add(sg.factors[f])
+    try:
+        if odometry is None:
+            isam.update(new_factors, new_values)
+        else:
+            odometry.update(isam, new_factors, new_values, new_odometry)
+        return np.array([isam.calculateEstimatePose3(pose_key(k)).matrix() for k in range(first, last + 1)])
+    except RuntimeError as err:
+        raise PoseGraphSolveError(f"iSAM2 failed adding poses {first} to {last}: {one_line(err)}") from None
 
 
 @dataclass(frozen=True)
@@ -340,35 +385,12 @@ def replay(
     odometry = None if sg.dvl is None else CalibratedOdometry(sg, RELINEARIZE_THRESHOLD, RELINEARIZE_SKIP)
     for u, (first, last) in enumerate(zip(firsts, lasts, strict=True)):
         start = time.perf_counter()
-        new_factors = gtsam.NonlinearFactorGraph()
-        new_values = gtsam.Values()
-        if first == 0:
-            new_values.insert(sg.unknowns())
-        for k in range(first, last + 1):
-            if k > 0:
-                current = current @ sg.pose_graph.T_ij[k - 1]
-            new_values.insert(pose_key(k), gtsam.Pose3(current))
-        new_odometry = []
-        for f in order[bounds[u] : bounds[u + 1]]:
-            if skip[f]:
-                continue
-            if odometry is not None and sg.kinds[f] == "odometry":
-                new_odometry.append(f)
-                continue
-            new_factors.add(sg.factors[f])
+        factors = [int(f) for f in order[bounds[u] : bounds[u + 1]] if not skip[f]]
+        for f in factors:
             if is_loop[f]:
                 loops_added[u] += 1
                 delays.append(float(t[last] - t[later[loop_number[f]]]))
-        try:
-            if odometry is None:
-                isam.update(new_factors, new_values)
-            else:
-                odometry.update(isam, new_factors, new_values, new_odometry)
-            for k in range(first, last + 1):
-                T_known[k] = isam.calculateEstimatePose3(pose_key(k)).matrix()
-        except RuntimeError as err:
-            message = " ".join(str(err).strip().split("\n\n")[0].split())
-            raise PoseGraphSolveError(f"iSAM2 failed adding poses {first} to {last}: {message}") from None
+        T_known[first : last + 1] = isam2_update(isam, sg, odometry, factors, first, last, current)
         current = T_known[last]
         known_s[first : last + 1] = t[last]
         seconds[u] = time.perf_counter() - start

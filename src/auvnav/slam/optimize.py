@@ -46,10 +46,10 @@ from auvnav.frames import FloatArray, rot2euler
 from auvnav.slam.compass import COEFFICIENTS_KEY
 from auvnav.slam.dvl import CALIBRATION_KEY
 from auvnav.slam.graph import SensorGraph, SlamOptions
-from auvnav.slam.online import CalibratedOdometry, OnlineRecord, relinearize_thresholds, replay
+from auvnav.slam.online import CalibratedOdometry, OnlineRecord, isam2_update, relinearize_thresholds, replay
 from auvnav.slam.pcm import LoopSelection, select_loops
 from auvnav.slam.poses import pose_key
-from auvnav.slam.solve import PoseGraphSolveError
+from auvnav.slam.solve import PoseGraphSolveError, one_line
 from auvnav.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -132,7 +132,7 @@ def _lm(
     try:
         return optimizer.optimize(), int(optimizer.iterations())
     except RuntimeError as err:
-        raise PoseGraphSolveError(f"SLAM solve failed: {_one_line(err)}") from None
+        raise PoseGraphSolveError(f"SLAM solve failed: {one_line(err)}") from None
 
 
 def _lm_cholesky_then_qr(
@@ -165,11 +165,6 @@ def lm_solve(
     return _lm_cholesky_then_qr([graph], values, max_iterations)[0]
 
 
-def _one_line(err: Exception) -> str:
-    """GTSAM's multi-paragraph messages as one line (their first paragraph)."""
-    return " ".join(str(err).strip().split("\n\n")[0].split())
-
-
 def _isam2(
     sg: SensorGraph, poses_per_update: int, drop_loops: NDArray[np.bool_] | None = None
 ) -> tuple[gtsam.Values, int]:
@@ -198,35 +193,11 @@ def _isam2(
         else CalibratedOdometry(sg, ISAM2_RELINEARIZE_THRESHOLD, params.relinearizeSkip)
     )
     for first in range(0, P, poses_per_update):
-        new_factors = gtsam.NonlinearFactorGraph()
-        new_values = gtsam.Values()
-        if first == 0:
-            for f in order[bounds[0] : bounds[1]]:  # the priors of the other unknowns
-                new_factors.add(sg.factors[f])
-            new_values.insert(sg.unknowns())
         last = min(first + poses_per_update, P) - 1
-        new_odometry = []
-        for k in range(first, last + 1):
-            if k > 0:
-                current = current @ sg.pose_graph.T_ij[k - 1]  # predict with the odometry
-            new_values.insert(pose_key(k), gtsam.Pose3(current))
-            for f in order[bounds[k + 1] : bounds[k + 2]]:
-                if skip[f]:
-                    continue
-                if odometry is not None and sg.kinds[f] == "odometry":
-                    new_odometry.append(int(f))
-                else:
-                    new_factors.add(sg.factors[f])
-        try:
-            if odometry is None:
-                isam.update(new_factors, new_values)
-            else:
-                odometry.update(isam, new_factors, new_values, new_odometry)
-            current = isam.calculateEstimatePose3(pose_key(last)).matrix()
-        except RuntimeError as err:
-            raise PoseGraphSolveError(
-                f"iSAM2 failed adding poses {first} to {last}: {_one_line(err)}"
-            ) from None
+        # the priors of the other unknowns come with the first update
+        factors = [int(f) for f in order[bounds[0] if first == 0 else bounds[first + 1] : bounds[last + 2]]]
+        factors = [f for f in factors if not skip[f]]
+        current = isam2_update(isam, sg, odometry, factors, first, last, current)[-1]
         updates += 1
     isam.update()
     return isam.calculateBestEstimate(), updates
@@ -391,7 +362,7 @@ def marginals(solution: SlamSolution, every: int = 1) -> PoseMarginals:
         # calls the system indeterminate (the demo's navigation check dive, 18,000 loop closures).
         m = linear.eliminateMultifrontal(gtsam.Ordering.ColamdGaussianFactorGraph(linear), gtsam.EliminateQR)
     except RuntimeError as err:
-        raise PoseGraphSolveError(f"marginals failed: {_one_line(err)}") from None
+        raise PoseGraphSolveError(f"marginals failed: {one_line(err)}") from None
     if every <= 1:
         rows = np.arange(P)
     else:
@@ -418,7 +389,7 @@ def _marginal_covariance(tree: gtsam.GaussianBayesTree, key: int) -> FloatArray:
         return np.linalg.inv(tree.marginalFactor(key, gtsam.EliminateQR).information())
     except (RuntimeError, np.linalg.LinAlgError) as err:
         raise PoseGraphSolveError(
-            f"marginals failed at {gtsam.DefaultKeyFormatter(key)}: {_one_line(err)}"
+            f"marginals failed at {gtsam.DefaultKeyFormatter(key)}: {one_line(err)}"
         ) from None
 
 

@@ -273,7 +273,7 @@ def _check_connected(graph: PoseGraph) -> None:
         )
 
 
-def _one_line(err: Exception) -> str:
+def one_line(err: Exception) -> str:
     """GTSAM's multi-paragraph messages as one line: the first paragraph, whitespace collapsed."""
     return " ".join(str(err).strip().split("\n\n")[0].split()) or type(err).__name__
 
@@ -292,7 +292,7 @@ def _initial_poses(graph: PoseGraph, initial: Initial | FloatArray) -> FloatArra
                 values = gtsam.lago.initialize(to_gtsam(replace(graph, information=diagonal))[0])
         except (RuntimeError, ValueError) as err:
             raise PoseGraphSolveError(
-                f"{graph.source or 'pose graph'}: chordal initialisation failed: {_one_line(err)}"
+                f"{graph.source or 'pose graph'}: chordal initialisation failed: {one_line(err)}"
             ) from None
         return _poses_from_values(graph, values)
     if isinstance(initial, str):
@@ -373,7 +373,7 @@ def optimize_batch(
     try:
         values = optimizer.optimize()
     except RuntimeError as err:
-        raise PoseGraphSolveError(f"{graph.source or 'pose graph'}: solve failed: {_one_line(err)}") from None
+        raise PoseGraphSolveError(f"{graph.source or 'pose graph'}: solve failed: {one_line(err)}") from None
     seconds = time.perf_counter() - start
     edge_chi2 = _edge_chi2(plain, values)
     result = SolveResult(
@@ -495,7 +495,7 @@ def optimize_incremental(
         except RuntimeError as err:
             raise PoseGraphSolveError(
                 f"{graph.source or 'pose graph'}: iSAM2 failed adding vertices {graph.ids[first]} to "
-                f"{graph.ids[last]}: {_one_line(err)}"
+                f"{graph.ids[last]}: {one_line(err)}"
             ) from None
         update_seconds[u] = time.perf_counter() - t0
     values = isam.calculateEstimate()
@@ -555,7 +555,7 @@ def marginal_covariances(
         cov = np.stack([marginals.marginalCovariance(int(key)) for key in wanted])
     except RuntimeError as err:
         raise PoseGraphSolveError(
-            f"{graph.source or 'pose graph'}: marginals failed: {_one_line(err)}"
+            f"{graph.source or 'pose graph'}: marginals failed: {one_line(err)}"
         ) from None
     if graph.dim == 3:
         cov = cov[:, _PERM_3D][:, :, _PERM_3D]
