@@ -19,7 +19,13 @@ from auvnav.sim.camera import (
 from auvnav.sim.texture import SeafloorTexture
 from auvnav.vision.camera import rectification
 from auvnav.vision.features import FeatureSettings, correct_illumination, detect, robust_contrast, spread
-from auvnav.vision.stereo import read_features, stereo_features, write_features
+from auvnav.vision.stereo import (
+    disparity_spread,
+    on_epipolar_line,
+    read_features,
+    stereo_features,
+    write_features,
+)
 
 
 def test_robust_contrast_is_the_standard_deviation_of_the_bulk() -> None:
@@ -123,8 +129,37 @@ def test_edge_safe_stereo_drops_matches_across_depth_steps_and_keeps_the_cache_e
     assert result[0.0][0] < 0.95 and result[0.5][0] >= 0.97
     assert result[0.5][2] > 0.9 * result[0.0][2]  # at little cost away from the edges
     feats = result[0.5][3]
-    assert feats.edge_px.max() > 0
+    assert feats.disparity_sigma_px.max() > 0
     write_features(feats, rect, tmp_path / "pair.feat")
     back = read_features(tmp_path / "pair.feat")
-    np.testing.assert_array_equal(back.edge_px, feats.edge_px)
+    np.testing.assert_array_equal(back.disparity_sigma_px, feats.disparity_sigma_px)
     np.testing.assert_array_equal(back.cov_cam_m2, feats.cov_cam_m2)
+
+
+@pytest.mark.parametrize("angle_deg", [20.0, 45.0, 75.0])
+def test_a_match_slid_along_stripes_is_put_back_on_its_row(angle_deg: float) -> None:
+    # Stripes (ripple crests) at an angle to the rows: Lucas-Kanade can slide a match along them, by
+    # up to a few pixels, moving its column and its row; the row is known (the pair's common offset,
+    # the median over its matches), so the column comes back.
+    rng = np.random.default_rng(3)
+    theta = np.radians(angle_deg)
+    y, x = np.mgrid[0:200, 0:300].astype(float)
+    phase = (-x * np.sin(theta) + y * np.cos(theta)) * 2 * np.pi / 9.0
+    left = np.clip(128 + 60 * np.sin(phase) + rng.normal(0, 1, x.shape), 0, 255).astype(np.uint8)
+    p = np.column_stack([rng.uniform(40, 260, 51), rng.uniform(40, 160, 51)]).astype(np.float32)
+    row_offset, disparity = 0.3, 12.0  # a rectification 0.3 px off, as a real one may be
+    true = np.column_stack([p[:, 0] - disparity, p[:, 1] + row_offset])
+    slide = rng.permutation(np.linspace(-3.0, 3.0, 51)) / np.cos(theta)  # by up to 3 px in columns
+    q = true + slide[:, None] * [np.cos(theta), np.sin(theta)]
+    columns, share = on_epipolar_line(p, q, np.ones(51, dtype=bool), left, 15)
+    assert np.abs(q[:, 0] - true[:, 0]).max() > 2.0  # the slide moved the columns
+    assert np.abs(columns - true[:, 0]).max() < 0.06  # 0.03 px with Scharr derivatives, 0.11 with Sobel
+    # the share of gradient energy across the columns: 2 sin^2 of the angle for stripes
+    np.testing.assert_allclose(np.median(share), 2 * np.sin(theta) ** 2, atol=0.05)
+
+
+def test_the_disparity_spread_of_no_matches_is_empty() -> None:
+    # a turbid pair whose every match fails the round trip reached OpenCV with no points, which it refuses
+    image = np.full((64, 64), 128, dtype=np.uint8)
+    none = np.zeros((0, 1, 2), dtype=np.float32)
+    assert disparity_spread(none, none, image, image, 15).shape == (0,)

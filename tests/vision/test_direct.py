@@ -113,7 +113,7 @@ def test_stripes_are_never_a_position(level_floor) -> None:
             p_cam_m=p,
             cov_cam_m2=np.tile(np.eye(3) * 1e-6, (len(p), 1, 1)),
             descriptors=np.zeros((len(p), 128), np.uint8),
-            edge_px=np.zeros(len(p)),
+            disparity_sigma_px=np.zeros(len(p)),
         )
 
     settings = DirectSettings()

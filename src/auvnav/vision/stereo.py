@@ -15,6 +15,10 @@ Edge-safe stereo: a patch that straddles a depth discontinuity (a ledge, a bould
 disparities and the tracker settles between them; such a match is found by tracking the window shifted
 by half its side in four directions (:func:`disparity_spread`), dropped when the disparity moves by
 more than ``edge_reject_px``, and otherwise given that spread as extra disparity noise.
+Oriented texture (ripple crests, stripes): the tracker slides along it, in columns and rows alike,
+and the forward-backward check cannot see it; each match's column is taken where the pair's common
+row puts it (:func:`on_epipolar_line`), its disparity noise raised by how little of its window's
+gradient runs across the columns, and a window of stripes along the rows is dropped.
 Each match is triangulated with a first-order covariance from the keypoint noise
 (:func:`~auvnav.vision.camera.triangulate`): the left keypoint's detection noise is common to both
 images, the tracker's (measured from the rows of the matches, :func:`split_noise`) independent.
@@ -26,7 +30,7 @@ the points and covariances are made from, compressed: the four rectified coordin
 1/256-pixel grid (the matches are put on that grid before they are triangulated, so a point read back
 is the point computed, bit for bit), the two noise figures and the rectified geometry, and the
 descriptors as :func:`~auvnav.vision.features.compand_descriptors` gives them (4 bits each), and each
-match's disparity spread (one byte), and the rectified, illumination-corrected left image at half the
+match's further disparity noise (one byte), and the rectified, illumination-corrected left image at half the
 size SIFT sees, as PNG (:func:`make_thumbnail`: what the direct registration aligns). On the check
 dive at half scale a pair's file holds about 62-68 KiB of features and 36-46 KiB of thumbnail
 (turbid to clear water).
@@ -62,13 +66,18 @@ from auvnav.vision.features import FeatureSettings, compand_descriptors, correct
 log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
-CACHE_VERSION = 9
+CACHE_VERSION = 11
 #: Rectified coordinates are kept on a grid of 1/GRID_PER_PX pixel (0.004 px, well under the tracker's
 #: few hundredths).
 GRID_PER_PX = 256
-#: The disparity spread of each match (:func:`disparity_spread`) is kept on a grid of 1/EDGE_PER_PX pixel,
-#: one byte (up to 255/64 = 4 px, beyond any ``edge_reject_px`` that keeps a match).
-EDGE_PER_PX = 64
+#: Each match's disparity noise beyond the keypoints' is kept on a grid of 1/DISPARITY_SIGMA_PER_BYTE
+#: pixel, one byte (up to 255/64 = 4 px: the edge term of any spread ``edge_reject_px`` keeps, and the
+#: oriented texture's of any share above MIN_ACROSS_SHARE, 4.2 sigma_independent).
+DISPARITY_SIGMA_PER_BYTE = 64
+#: A match whose window has less than this share of its gradient energy across the columns
+#: (:func:`on_epipolar_line`; 1 for texture alike in every direction) is dropped: stripes within about
+#: 13 degrees of the rows, whose disparity the window barely sees.
+MIN_ACROSS_SHARE = 0.1
 #: A match's extra disparity noise, 1-sigma, per pixel of its disparity spread: the RMS disparity error of
 #: the matches (with ``edge_reject_px`` 3.9) grows as about a third of their spread (0.035 px at spreads
 #: below 0.1 px, 0.11 px at 0.2-0.35, 0.22 px at 0.5-1; ``benchmarks/bench_stereo_edges.py``).
@@ -81,9 +90,9 @@ EDGE_NOISE_FACTOR = 5.0
 #: zlib level of the thumbnails' PNG: on half-scale check-dive images level 3 takes 2.5 ms for 37 KiB,
 #: level 9 28 ms for 35 KiB, lossless WebP 26 ms for 29 KiB (of a front end at about 0.15 CPU s a pair).
 THUMBNAIL_PNG_LEVEL = 3
-_MAGIC = b"AUVNAVF7"
+_MAGIC = b"AUVNAVF8"
 # magic, matches, f, baseline, cx, cy, R1 (9), sigma common, sigma independent, thumbnail scales (2),
-# bytes of each blob (geometry, descriptors, edge spreads, thumbnail)
+# bytes of each blob (geometry, descriptors, disparity sigmas, thumbnail)
 _HEADER = struct.Struct("<8sI17dIIII")
 
 
@@ -105,11 +114,11 @@ class StereoFeatures:
         (:func:`~auvnav.vision.features.compand_descriptors`).
     sigma_px : (float, float)
         The keypoint noise's parts common to and independent between the images (:func:`split_noise`).
-    edge_px : ndarray, shape (N,), optional
-        Each match's disparity spread over shifted windows (:func:`disparity_spread`), rectified
-        pixels on a 1/:data:`EDGE_PER_PX` grid: an extra independent disparity noise of
-        :data:`EDGE_SIGMA_PER_SPREAD` times it, 1-sigma, in the point's covariance (a match near a
-        depth edge counts for less). None: zeros.
+    disparity_sigma_px : ndarray, shape (N,), optional
+        Each match's disparity noise beyond the keypoints' (1-sigma, rectified pixels, on a
+        1/:data:`DISPARITY_SIGMA_PER_BYTE` grid), in the point's covariance: a depth edge's,
+        :data:`EDGE_SIGMA_PER_SPREAD` times the disparity spread over shifted windows
+        (:func:`disparity_spread`), and an oriented texture's (:func:`on_epipolar_line`). None: zeros.
     thumbnail : bytes, optional
         The rectified, illumination-corrected left image, reduced (:func:`make_thumbnail`), as PNG:
         what the direct registration (:mod:`auvnav.vision.direct`) aligns. None: not kept.
@@ -124,21 +133,21 @@ class StereoFeatures:
     cov_cam_m2: FloatArray
     descriptors: NDArray[np.uint8]
     sigma_px: tuple[float, float] = (0.0, 0.0)
-    edge_px: FloatArray | None = None
+    disparity_sigma_px: FloatArray | None = None
     thumbnail: bytes | None = None
     thumbnail_scale: tuple[float, float] = (0.0, 0.0)
     geometry: StereoGeometry | None = None
 
     def __post_init__(self) -> None:
         n = len(self.p_cam_m)
-        if self.edge_px is None:
-            object.__setattr__(self, "edge_px", np.zeros(n))
+        if self.disparity_sigma_px is None:
+            object.__setattr__(self, "disparity_sigma_px", np.zeros(n))
         shapes = {
             "uv_rect_px": (np.shape(self.uv_rect_px), (n, 4)),
             "p_cam_m": (np.shape(self.p_cam_m), (n, 3)),
             "cov_cam_m2": (np.shape(self.cov_cam_m2), (n, 3, 3)),
             "descriptors": (np.shape(self.descriptors), (n, 128)),
-            "edge_px": (np.shape(self.edge_px), (n,)),
+            "disparity_sigma_px": (np.shape(self.disparity_sigma_px), (n,)),
         }
         for name, (found, want) in shapes.items():
             if found != want:
@@ -179,18 +188,23 @@ def stereo_features(
     kl = detect(flat_left, settings)
     rl = rectify_points(kl.uv_px, rig.left, rect.R1, rect.P1)
     flat = rectify_images(flat_left, flat_right, rig, rect)
-    rr, ok, spread = track_right(rl, *flat, rect, settings)
+    rr, ok, spread, share = track_right(rl, *flat, rect, settings)
     scale = settings.scale_for(left.shape[1])
     sigma = split_noise(rr[ok, 1] - rl[ok, 1], settings.sigma_px / scale)
     uv = np.round(np.column_stack([rl[ok], rr[ok]]) * GRID_PER_PX) / GRID_PER_PX
-    edge = np.minimum(np.round(spread[ok] * EDGE_PER_PX), 255) / EDGE_PER_PX
-    p, cov = triangulate(uv[:, :2], uv[:, 2:], rect, *sigma, sigma_disparity_px=EDGE_SIGMA_PER_SPREAD * edge)
+    # the disparity's noise beyond the keypoints' (2 sigma_independent^2): a depth edge's, and the
+    # oriented texture's, which makes it 2 sigma_independent^2 / share
+    extra = np.hypot(
+        EDGE_SIGMA_PER_SPREAD * spread[ok], sigma[1] * np.sqrt(np.maximum(2.0 / share[ok] - 2.0, 0.0))
+    )
+    extra = np.minimum(np.round(extra * DISPARITY_SIGMA_PER_BYTE), 255) / DISPARITY_SIGMA_PER_BYTE
+    p, cov = triangulate(uv[:, :2], uv[:, 2:], rect, *sigma, sigma_disparity_px=extra)
     thumb, thumb_scale = None, (0.0, 0.0)
     if settings.thumbnail_scale > 0:
         thumb, thumb_scale = make_thumbnail(flat[0], scale * settings.thumbnail_scale)
     geometry = StereoGeometry(rect.f_px, rect.cx_px, rect.cy_px, rect.baseline_m, rect.R1)
     descriptors = compand_descriptors(kl.descriptors[ok])
-    return StereoFeatures(uv, p, cov, descriptors, sigma, edge, thumb, thumb_scale, geometry)
+    return StereoFeatures(uv, p, cov, descriptors, sigma, extra, thumb, thumb_scale, geometry)
 
 
 def track_right(
@@ -199,10 +213,11 @@ def track_right(
     right_rect: NDArray[np.uint8],
     rect: Rectification,
     settings: FeatureSettings,
-) -> tuple[FloatArray, NDArray[np.bool_], FloatArray]:
+) -> tuple[FloatArray, NDArray[np.bool_], FloatArray, FloatArray]:
     """Where rectified left keypoints ``rl`` (N, 2) lie in the rectified right image, by pyramidal
-    Lucas-Kanade, which are trusted, and how far each one's disparity moves when its window is shifted
-    (:func:`disparity_spread`, pixels; 0 where not trusted).
+    Lucas-Kanade, which are trusted, how far each one's disparity moves when its window is shifted
+    (:func:`disparity_spread`, pixels; 0 where not trusted), and each window's share of gradient
+    energy across the columns (:func:`on_epipolar_line`; 1 where not trusted).
 
     The scene's dominant disparity comes from phase correlation of the two images (:func:`image_shift`);
     a first pass on a sample of the keypoints, from that disparity, finds the scene's median disparity
@@ -212,12 +227,15 @@ def track_right(
     point between ``min_range_m`` and ``max_range_m``, and, edge-safe stereo, its disparity moves by at
     most ``edge_reject_px`` (or :data:`EDGE_NOISE_FACTOR` times the lower quartile over the pair's
     matches, whichever is larger) when the window is shifted by half its side (a patch across a depth
-    discontinuity does not). Returns the right positions (N, 2), the mask and the shifts' spread.
+    discontinuity does not). The column of each match is then the one on the pair's common row
+    (:func:`on_epipolar_line`: Lucas-Kanade drifts along oriented texture, ripple crests), and a match
+    whose window has less than :data:`MIN_ACROSS_SHARE` of its gradient energy across the columns
+    (stripes along the rows: no disparity to measure) is dropped.
     """
     n = len(rl)
     ok = np.zeros(n, dtype=bool)
     if n == 0:
-        return np.zeros((0, 2)), ok, np.zeros(0)
+        return np.zeros((0, 2)), ok, np.zeros(0), np.ones(0)
     scale = settings.scale_for(left_rect.shape[1])
     window = 2 * round(settings.lk_window_px / scale / 2) + 1
     lk = {
@@ -243,7 +261,7 @@ def track_right(
     q, st, _ = cv2.calcOpticalFlowPyrLK(left_rect, right_rect, sample, guess, maxLevel=3, flags=flags, **lk)
     vote = (st[:, 0] == 1) & plausible(sample, q)
     if not vote.any():
-        return np.zeros((n, 2)), ok, np.zeros(n)
+        return np.zeros((n, 2)), ok, np.zeros(n), np.ones(n)
     guess = p0.copy()
     guess[:, 0, 0] -= float(np.median(sample[vote, 0, 0] - q[vote, 0, 0]))
     q, st, _ = cv2.calcOpticalFlowPyrLK(left_rect, right_rect, p0, guess, maxLevel=2, flags=flags, **lk)
@@ -261,7 +279,41 @@ def track_right(
         ok &= spread * scale <= max(settings.edge_reject_px, noise)
     else:
         spread = np.zeros(n)
-    return q[:, 0].astype(float), ok, np.where(ok, spread, 0.0)
+    right, share = q[:, 0].astype(float), np.ones(n)
+    if ok.any():
+        right[:, 0], share = on_epipolar_line(p0[:, 0], right, ok, left_rect, window)
+        ok &= share >= MIN_ACROSS_SHARE
+    return right, ok, np.where(ok, spread, 0.0), np.where(ok, share, 1.0)
+
+
+def on_epipolar_line(
+    p: NDArray[np.float32], q: FloatArray, ok: NDArray[np.bool_], left: NDArray[np.uint8], window: int
+) -> tuple[FloatArray, FloatArray]:
+    """The right columns of matches ``p`` -> ``q`` (N, 2, rectified pixels) given that each lies on the
+    pair's common row offset (the median over the trusted matches ``ok``: 0 for a perfect
+    rectification), and each window's share of its gradient energy across the columns (1 for texture
+    alike in every direction, 0 for stripes along the rows).
+
+    Lucas-Kanade finds a 2-D displacement whose covariance is the noise over the window's structure
+    tensor ``G = sum [gx^2, gx gy; gx gy, gy^2]`` (Lucas and Kanade 1981; Shi and Tomasi 1994, "Good
+    features to track", CVPR). Along an oriented texture (ripple crests) it drifts along the texture,
+    in columns and rows alike. The row is known, so the column is the Gaussian conditional of the two:
+    ``x + (G01 / G00) (y - y0)``, whose variance, noise / ``G00``, has none of the drift; over a window
+    of texture alike in every direction it is noise / (``trace G`` / 2), and the share ``2 G00 /
+    trace G`` says how much larger it is elsewhere."""
+    img = left.astype(np.float32)
+    gx = cv2.Scharr(img, cv2.CV_32F, 1, 0)
+    gy = cv2.Scharr(img, cv2.CV_32F, 0, 1)
+    h, w = img.shape
+    col = np.clip(np.rint(p[:, 0]).astype(np.intp), 0, w - 1)
+    row = np.clip(np.rint(p[:, 1]).astype(np.intp), 0, h - 1)
+    a, b, c = (
+        cv2.boxFilter(g, -1, (window, window), normalize=False)[row, col].astype(float)
+        for g in (gx * gx, gx * gy, gy * gy)
+    )
+    dy = q[:, 1] - p[:, 1]
+    columns = q[:, 0] + b / np.maximum(a, 1e-12) * (dy - float(np.median(dy[ok])))
+    return columns, 2.0 * a / np.maximum(a + c, 1e-12)
 
 
 def disparity_spread(
@@ -286,6 +338,8 @@ def disparity_spread(
     h = window // 2
     d0 = p[:, 0, 0] - q[:, 0, 0]
     spread = np.zeros(len(p))
+    if len(p) == 0:  # OpenCV refuses empty point sets
+        return spread
     for du, dv in ((-h, 0), (h, 0), (0, -h), (0, h)):
         shift = np.array([du, dv], dtype=np.float32)
         ps = np.ascontiguousarray(p + shift)
@@ -365,8 +419,9 @@ def write_features(features: StereoFeatures, rect: Rectification, path: Path) ->
     geometry = zlib.compress(grid.view(np.uint8).reshape(len(grid), 4, 4).transpose(1, 2, 0).tobytes(), 6)
     q = features.descriptors
     descriptors = zlib.compress((q[:, ::2] << 4 | q[:, 1::2]).astype(np.uint8).tobytes(), 6)
-    edge_px = np.zeros(len(features)) if features.edge_px is None else features.edge_px
-    edge = zlib.compress(np.minimum(np.round(edge_px * EDGE_PER_PX), 255).astype(np.uint8).tobytes(), 6)
+    extra_px = np.zeros(len(features)) if features.disparity_sigma_px is None else features.disparity_sigma_px
+    extra = np.minimum(np.round(extra_px * DISPARITY_SIGMA_PER_BYTE), 255).astype(np.uint8)
+    edge = zlib.compress(extra.tobytes(), 6)
     thumb = features.thumbnail or b""
     header = _HEADER.pack(
         _MAGIC,
@@ -411,14 +466,12 @@ def read_features(path: Path | str) -> StereoFeatures:
     desc = np.empty((n, 128), dtype=np.uint8)
     desc[:, ::2] = packed.reshape(n, 64) >> 4
     desc[:, 1::2] = packed.reshape(n, 64) & 15
-    edge = edge_q / EDGE_PER_PX
+    extra = edge_q / DISPARITY_SIGMA_PER_BYTE
     geometry = StereoGeometry(f, cx, cy, b, R1)
-    p, cov = triangulate(
-        uv[:, :2], uv[:, 2:], geometry, sc, si, sigma_disparity_px=EDGE_SIGMA_PER_SPREAD * edge
-    )
+    p, cov = triangulate(uv[:, :2], uv[:, 2:], geometry, sc, si, sigma_disparity_px=extra)
     thumb = data[expected - nt :] if nt else None
     return StereoFeatures(
-        uv, p, cov, desc, (sc, si), edge, thumb, thumb_scale if nt else (0.0, 0.0), geometry
+        uv, p, cov, desc, (sc, si), extra, thumb, thumb_scale if nt else (0.0, 0.0), geometry
     )
 
 
