@@ -195,8 +195,8 @@ def _isam2(
     for first in range(0, P, poses_per_update):
         last = min(first + poses_per_update, P) - 1
         # the priors of the other unknowns come with the first update
-        factors = [int(f) for f in order[bounds[0] if first == 0 else bounds[first + 1] : bounds[last + 2]]]
-        factors = [f for f in factors if not skip[f]]
+        new = order[bounds[0] if first == 0 else bounds[first + 1] : bounds[last + 2]]
+        factors = [int(f) for f in new if not skip[f]]
         current = isam2_update(isam, sg, odometry, factors, first, last, current)[-1]
         updates += 1
     isam.update()

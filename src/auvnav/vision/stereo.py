@@ -197,7 +197,7 @@ def stereo_features(
     extra = np.hypot(
         EDGE_SIGMA_PER_SPREAD * spread[ok], sigma[1] * np.sqrt(np.maximum(2.0 / share[ok] - 2.0, 0.0))
     )
-    extra = np.minimum(np.round(extra * DISPARITY_SIGMA_PER_BYTE), 255) / DISPARITY_SIGMA_PER_BYTE
+    extra = _sigma_bytes(extra) / DISPARITY_SIGMA_PER_BYTE  # as the cache keeps it
     p, cov = triangulate(uv[:, :2], uv[:, 2:], rect, *sigma, sigma_disparity_px=extra)
     thumb, thumb_scale = None, (0.0, 0.0)
     if settings.thumbnail_scale > 0:
@@ -412,6 +412,11 @@ def cache_path(cache_dir: Path, left: Path, right: Path, rig: StereoRig, setting
     return cache_dir / f"{left.parent.name}_{stem}_{h.hexdigest()[:16]}.feat"
 
 
+def _sigma_bytes(sigma_px: FloatArray) -> NDArray[np.uint8]:
+    """Disparity sigmas on the cache's one-byte grid (1/:data:`DISPARITY_SIGMA_PER_BYTE` px, saturating)."""
+    return np.minimum(np.round(sigma_px * DISPARITY_SIGMA_PER_BYTE), 255).astype(np.uint8)
+
+
 def write_features(features: StereoFeatures, rect: Rectification, path: Path) -> None:
     """Write a pair's features to a cache file (atomically; the module docstring says what it holds)."""
     grid = np.round(features.uv_rect_px * GRID_PER_PX).astype("<i4")
@@ -419,9 +424,8 @@ def write_features(features: StereoFeatures, rect: Rectification, path: Path) ->
     geometry = zlib.compress(grid.view(np.uint8).reshape(len(grid), 4, 4).transpose(1, 2, 0).tobytes(), 6)
     q = features.descriptors
     descriptors = zlib.compress((q[:, ::2] << 4 | q[:, 1::2]).astype(np.uint8).tobytes(), 6)
-    extra_px = np.zeros(len(features)) if features.disparity_sigma_px is None else features.disparity_sigma_px
-    extra = np.minimum(np.round(extra_px * DISPARITY_SIGMA_PER_BYTE), 255).astype(np.uint8)
-    edge = zlib.compress(extra.tobytes(), 6)
+    assert features.disparity_sigma_px is not None  # StereoFeatures fills it
+    sigmas = zlib.compress(_sigma_bytes(features.disparity_sigma_px).tobytes(), 6)
     thumb = features.thumbnail or b""
     header = _HEADER.pack(
         _MAGIC,
@@ -435,10 +439,10 @@ def write_features(features: StereoFeatures, rect: Rectification, path: Path) ->
         *features.thumbnail_scale,
         len(geometry),
         len(descriptors),
-        len(edge),
+        len(sigmas),
         len(thumb),
     )
-    atomic_write(path, lambda p: p.write_bytes(header + geometry + descriptors + edge + thumb))
+    atomic_write(path, lambda p: p.write_bytes(header + geometry + descriptors + sigmas + thumb))
 
 
 def read_features(path: Path | str) -> StereoFeatures:
@@ -457,16 +461,16 @@ def read_features(path: Path | str) -> StereoFeatures:
     try:
         grid = np.frombuffer(zlib.decompress(data[start : start + ng]), dtype=np.uint8)
         packed = np.frombuffer(zlib.decompress(data[start + ng : start + ng + nd]), dtype=np.uint8)
-        edge_q = np.frombuffer(zlib.decompress(data[start + ng + nd : start + ng + nd + ne]), dtype=np.uint8)
+        sigma_q = np.frombuffer(zlib.decompress(data[start + ng + nd : start + ng + nd + ne]), dtype=np.uint8)
     except zlib.error as err:
         raise ValueError(f"corrupt feature cache file ({err})") from None
-    if grid.size != 16 * n or packed.size != 64 * n or edge_q.size != n:
+    if grid.size != 16 * n or packed.size != 64 * n or sigma_q.size != n:
         raise ValueError("corrupt feature cache file (sizes disagree with its header)")
     uv = grid.reshape(4, 4, n).transpose(2, 0, 1).copy().view("<i4").reshape(n, 4) / GRID_PER_PX
     desc = np.empty((n, 128), dtype=np.uint8)
     desc[:, ::2] = packed.reshape(n, 64) >> 4
     desc[:, 1::2] = packed.reshape(n, 64) & 15
-    extra = edge_q / DISPARITY_SIGMA_PER_BYTE
+    extra = sigma_q / DISPARITY_SIGMA_PER_BYTE
     geometry = StereoGeometry(f, cx, cy, b, R1)
     p, cov = triangulate(uv[:, :2], uv[:, 2:], geometry, sc, si, sigma_disparity_px=extra)
     thumb = data[expected - nt :] if nt else None
