@@ -48,6 +48,10 @@ def test_defaults_and_round_trip(tmp_path: Path) -> None:
         ({"gps": {"mount": {"lever_arm_m": [1, 2]}}}, "must have 3 elements"),
         ({"dvl": {"mount": {"rpy_deg": [0, 0, 1], "R_body_sensor": np.eye(3).tolist()}}}, "not both"),
         ({"stereo": {"calibration_file": "x.yaml"}}, "calibration_format"),
+        (
+            {"stereo": {"calibration_file": "x.yml", "calibration_format": "opencv", "left_bayer": "rgb"}},
+            "rggb",
+        ),
     ],
 )
 def test_bad_vehicle_files_are_one_line_errors(tmp_path: Path, data: dict, expected: str) -> None:
@@ -72,6 +76,30 @@ def test_opencv_filestorage_stereo(tmp_path: Path) -> None:
     np.testing.assert_allclose(v.stereo.R_right_left, R_RL, atol=1e-12)
     assert v.stereo.baseline_m == pytest.approx(np.linalg.norm(T_RL))
     assert np.degrees(v.stereo.left.hfov_rad) == pytest.approx(46.05, abs=0.01)
+    assert v.stereo.left.bayer is None
+
+
+def test_a_raw_colour_camera_keeps_its_bayer_filter(tmp_path: Path) -> None:
+    """The ACFR layout: a raw colour left camera (its filter named by the top-left 2 x 2 block), a
+    monochrome right one; the filter survives the round trip and enters the cache key."""
+    from auvnav.vision.camera import rig_digest
+
+    fs = cv2.FileStorage(str(tmp_path / "stereo.yml"), cv2.FILE_STORAGE_WRITE)
+    fs.write("image_width", 1360)
+    fs.write("image_height", 1024)
+    for name, m in [("M1", K), ("D1", D), ("M2", K), ("D2", D), ("R", R_RL), ("T", T_RL.reshape(3, 1))]:
+        fs.write(name, m)
+    fs.release()
+    stereo = {"calibration_file": "stereo.yml", "calibration_format": "opencv"}
+    plain = read_vehicle(_write(tmp_path, {"stereo": stereo}))
+    v = read_vehicle(_write(tmp_path, {"stereo": {**stereo, "left_bayer": "rggb"}}))
+    assert v.stereo is not None and plain.stereo is not None
+    assert (v.stereo.left.bayer, v.stereo.right.bayer) == ("rggb", None)
+    write_vehicle(v, tmp_path / "again.yaml")
+    again = read_vehicle(tmp_path / "again.yaml")
+    assert again.stereo is not None and again.stereo.left.bayer == "rggb"
+    assert vehicle_to_mapping(again) == vehicle_to_mapping(v)
+    assert rig_digest(v.stereo) != rig_digest(plain.stereo)
 
 
 def test_ros_camera_info_stereo(tmp_path: Path) -> None:

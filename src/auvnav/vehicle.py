@@ -18,9 +18,9 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, get_args
 
 import numpy as np
 from numpy.typing import NDArray
@@ -73,6 +73,11 @@ class Mount:
             )
 
 
+#: Colour filter layouts of raw images, named by the 2 x 2 block at the top-left corner.
+Bayer = Literal["rggb", "bggr", "grbg", "gbrg"]
+BAYER_PATTERNS: tuple[str, ...] = get_args(Bayer)
+
+
 @dataclass(frozen=True)
 class CameraModel:
     """Pinhole camera with OpenCV radial-tangential distortion.
@@ -85,12 +90,18 @@ class CameraModel:
         Intrinsic matrix, pixels.
     D : ndarray, shape (k,)
         Distortion (k1, k2, p1, p2[, k3]), OpenCV order.
+    bayer : str, optional
+        The colour filter of a camera that writes its sensor's raw mosaic (one channel; survey cameras
+        often write 12- or 16-bit raw TIFF or PNG): the 2 x 2 block at the image's top-left corner,
+        one of :data:`BAYER_PATTERNS`. Its images are demosaiced when read. None: images already grey
+        or colour.
     """
 
     width: int
     height: int
     K: FloatArray
     D: FloatArray = field(default_factory=lambda: np.zeros(5))
+    bayer: str | None = None
 
     def __post_init__(self) -> None:
         if not (0 < self.width <= MAX_IMAGE_PX and 0 < self.height <= MAX_IMAGE_PX):
@@ -109,6 +120,8 @@ class CameraModel:
         D = np.asarray(self.D)
         if D.ndim != 1 or D.size not in (4, 5, 8, 12, 14) or not np.all(np.isfinite(D)):
             raise ValueError(f"D must hold 4, 5, 8, 12 or 14 finite coefficients; found {quote(D.tolist())}")
+        if self.bayer is not None and self.bayer not in BAYER_PATTERNS:
+            raise ValueError(f"bayer must be one of {', '.join(BAYER_PATTERNS)}; found {quote(self.bayer)}")
 
     @property
     def hfov_rad(self) -> float:
@@ -116,7 +129,8 @@ class CameraModel:
         return float(2 * np.arctan(self.width / (2 * self.K[0, 0])))
 
     def scaled(self, factor: float) -> CameraModel:
-        """The same camera for images resized by ``factor`` (pixel-centre convention)."""
+        """The same camera for images resized by ``factor`` (pixel-centre convention; a resized image is
+        a demosaiced one: no Bayer pattern)."""
         S = np.diag([factor, factor, 1.0])
         K = S @ self.K
         K[0, 2] = (self.K[0, 2] + 0.5) * factor - 0.5
@@ -282,6 +296,8 @@ class _StereoFile(_Strict):
     t_right_left_m: list[float] | None = None
     calibration_file: str | list[str] | None = None
     calibration_format: Literal["opencv", "ros"] | None = None
+    left_bayer: Bayer | None = None
+    right_bayer: Bayer | None = None
 
     @model_validator(mode="after")
     def _one_source(self) -> _StereoFile:
@@ -527,22 +543,29 @@ def calibration_files(data: Any) -> list[str]:
 
 
 def image_size_problem(path: Path, display: str, cam: CameraModel, vehicle_display: str) -> Problem | None:
-    """The problem when an image's size (read from its header) is not the calibrated one, else None
-    (also when the header cannot be read: the stage that reads the image says so)."""
+    """The problem when an image's size (read from its header) is not the calibrated one, or when the
+    camera writes raw mosaics (:attr:`CameraModel.bayer`) and the image has more than one channel;
+    else None (also when the header cannot be read: the stage that reads the image says so)."""
     from PIL import Image, UnidentifiedImageError
 
     try:
         with Image.open(path) as image:
-            w, h = image.size
+            (w, h), bands = image.size, len(image.getbands())
     except (OSError, UnidentifiedImageError, ValueError, Image.DecompressionBombError):
         return None
-    if (w, h) == (cam.width, cam.height):
-        return None
-    return Problem(
-        display,
-        f"image is {w}x{h} but the stereo calibration in {vehicle_display} is for {cam.width}x{cam.height}; "
-        "images and calibration must match (scale the calibration with the images)",
-    )
+    if (w, h) != (cam.width, cam.height):
+        return Problem(
+            display,
+            f"image is {w}x{h} but the stereo calibration in {vehicle_display} is for "
+            f"{cam.width}x{cam.height}; images and calibration must match (scale the calibration with the images)",
+        )
+    if cam.bayer is not None and bands != 1:
+        return Problem(
+            display,
+            f"image has {bands} channels but {vehicle_display} gives its camera a Bayer filter "
+            f"({cam.bayer}): a raw mosaic has one (drop left_bayer / right_bayer for demosaiced images)",
+        )
+    return None
 
 
 def _stereo(s: _StereoFile, base: Path) -> StereoRig:
@@ -558,6 +581,7 @@ def _stereo(s: _StereoFile, base: Path) -> StereoRig:
         if not isinstance(files, list) or len(files) != 2:
             raise ConfigError("stereo.calibration_file: a ROS calibration is two files [left, right]")
         left, right, R, t = read_ros_stereo(base / files[0], base / files[1])
+    left, right = replace(left, bayer=s.left_bayer), replace(right, bayer=s.right_bayer)
     return StereoRig(left, right, R, t, s.mount.to_mount())
 
 
@@ -646,6 +670,9 @@ def vehicle_to_mapping(v: Vehicle) -> dict[str, Any]:
             "R_right_left": s.R_right_left.tolist(),
             "t_right_left_m": s.t_right_left_m.tolist(),
         }
+        for side, cam in (("left", s.left), ("right", s.right)):
+            if cam.bayer is not None:
+                out["stereo"][f"{side}_bayer"] = cam.bayer
     return out
 
 

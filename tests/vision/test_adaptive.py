@@ -4,9 +4,11 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import cv2
 import numpy as np
 import pytest
 
+from auvnav.errors import ConfigError
 from auvnav.frames import euler2rot, se3
 from auvnav.sim.camera import (
     SteppedFloor,
@@ -23,6 +25,7 @@ from auvnav.vision.stereo import (
     disparity_spread,
     on_epipolar_line,
     read_features,
+    read_grey,
     stereo_features,
     write_features,
 )
@@ -59,6 +62,65 @@ def test_stretch_reaches_the_target_on_a_low_contrast_image(textured) -> None:
     h, w = faint.shape
     cells = np.unique((kp.uv_px[:, 1] * 8 // h) * 8 + kp.uv_px[:, 0] * 8 // w)
     assert len(cells) >= 0.9 * 64
+
+
+@pytest.mark.parametrize(
+    ("suffix", "dtype", "full_scale"), [(".png", np.uint16, 4095), (".tiff", np.float32, 1.0)]
+)
+def test_a_deeper_image_is_read_on_its_own_scale(
+    textured, tmp_path, suffix: str, dtype, full_scale: float
+) -> None:
+    """A 12-bit camera's image in a 16-bit file (ROS mono16), or as floats, reads as the picture its
+    8-bit version shows, not as OpenCV's high byte (which leaves 12-bit data 16 grey levels), and SIFT
+    finds the same keypoints in it."""
+    top = float(np.quantile(textured, 0.999))
+    deep = textured.astype(np.float64) * (full_scale / 255.0)
+    path = tmp_path / f"deep{suffix}"
+    assert cv2.imwrite(str(path), deep.astype(dtype) if dtype == np.float32 else np.rint(deep).astype(dtype))
+    assert len(np.unique(cv2.imread(str(path), cv2.IMREAD_GRAYSCALE))) <= 16 or dtype == np.float32
+    grey = read_grey(path)
+    assert grey is not None and grey.dtype == np.uint8
+    expected = np.clip(textured * (255.0 / top), 0, 255)
+    assert np.abs(grey - expected).max() <= 1.0
+    settings = FeatureSettings(max_features=300)
+    a, b = detect(grey, settings).uv_px, detect(np.rint(expected).astype(np.uint8), settings).uv_px
+    near = np.min(np.linalg.norm(a[:, None] - b[None], axis=2), axis=1)
+    assert min(len(a), len(b)) >= 295 and np.mean(near < 0.5) > 0.9
+
+
+def test_a_raw_mosaic_is_demosaiced_to_the_picture_the_camera_saw(level_floor, tmp_path) -> None:
+    """A survey camera's raw 12-bit RGGB mosaic in a 16-bit PNG (oplab_pipeline's cameras name
+    rggb, grbg): demosaiced by its filter, it is the colour image's luminance to a grey level; read as
+    grey, or with the green sites taken for red, it is a checkerboard. A colour image where the vehicle
+    says raw is a one-line error naming the file."""
+    rig = scale_camera_rig(default_stereo_rig(), 0.25)
+    T = se3(euler2rot(0.3, 0.0, 0.0), np.array([0.0, 0.0, 18.0]))
+    colour, _ = render_stereo_pair(level_floor(20.0), SeafloorTexture(seed=2, bare_fraction=0.0), rig, T)
+    raw = np.empty(colour.shape[:2], np.uint16)
+    raw[0::2, 0::2], raw[1::2, 1::2] = colour[0::2, 0::2, 2], colour[1::2, 1::2, 0]  # BGR: red, blue
+    raw[0::2, 1::2], raw[1::2, 0::2] = colour[0::2, 1::2, 1], colour[1::2, 0::2, 1]
+    cv2.imwrite(str(tmp_path / "raw.png"), raw * 16)
+    truth = to_grey(colour)[2:-2, 2:-2].astype(float)
+
+    def agreement(bayer: str | None) -> tuple[float, float]:
+        grey = read_grey(tmp_path / "raw.png", bayer)
+        assert grey is not None
+        g = grey[2:-2, 2:-2].astype(float)
+        g *= np.median(truth) / np.median(g)
+        return float(np.corrcoef(g.ravel(), truth.ravel())[0, 1]), float(np.median(np.abs(g - truth)))
+
+    correlation, grey_levels = agreement("rggb")
+    assert correlation > 0.995 and grey_levels < 1.5
+    assert agreement(None)[0] < 0.8 and agreement("grbg")[0] < 0.95
+    cv2.imwrite(str(tmp_path / "colour.png"), colour)
+    with pytest.raises(ConfigError, match=r"colour\.png: vehicle\.yaml gives its camera a Bayer filter"):
+        read_grey(tmp_path / "colour.png", "rggb")
+
+
+def test_an_image_without_light_is_skipped(tmp_path, caplog) -> None:
+    path = tmp_path / "dark.png"
+    cv2.imwrite(str(path), np.zeros((40, 60), np.uint16))
+    assert read_grey(path) is None and "no light" in caplog.text and "dark.png" in caplog.text
 
 
 def _rows(kp) -> np.ndarray:

@@ -150,6 +150,48 @@ def test_calibration_that_does_not_match_the_images_is_one_line(tiny_dive, tmp_p
     assert not (copy / "products" / "vision").exists()  # nothing left behind
 
 
+def test_a_dive_of_raw_mosaics_finds_the_loops_of_its_colour_images(
+    tiny_dive, tmp_path: Path, capsys
+) -> None:
+    """The tiny dive's images as a survey camera writes them (raw 12-bit RGGB mosaics in 16-bit PNG,
+    ``left_bayer``/``right_bayer`` in vehicle.yaml) give the loops of its colour images; colour images
+    where vehicle.yaml says raw are one line from ``auvnav validate`` and from the loop stage, which
+    leaves nothing behind."""
+    import dataclasses
+
+    import cv2
+
+    colour = find_loops(read_dive(tiny_dive.path), read_prior(tiny_dive.path), settings=FAST)
+    copy = tmp_path / "dive"
+    shutil.copytree(tiny_dive.path, copy, ignore=shutil.ignore_patterns("products"))
+    shutil.copytree(tiny_dive.path / "products" / "nav", copy / "products" / "nav")
+    vehicle = read_vehicle(copy / "vehicle.yaml")
+    rig = vehicle.stereo
+    assert rig is not None
+    raw_rig = dataclasses.replace(
+        rig,
+        left=dataclasses.replace(rig.left, bayer="rggb"),
+        right=dataclasses.replace(rig.right, bayer="rggb"),
+    )
+    write_vehicle(dataclasses.replace(vehicle, stereo=raw_rig), copy / "vehicle.yaml")
+    assert main(["validate", str(copy)]) == 1
+    assert "image has 3 channels but" in capsys.readouterr().err
+    assert main(["loops", str(copy), "--workers", "1", "-q"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "000000.png: image has 3 channels but" in err[0] and "(rggb)" in err[0]
+    assert not (copy / "products" / "vision").exists()
+    for path in sorted((copy / "images").glob("*/*.png")):
+        bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        raw = np.empty(bgr.shape[:2], np.uint16)
+        raw[0::2, 0::2], raw[1::2, 1::2] = bgr[0::2, 0::2, 2], bgr[1::2, 1::2, 0]
+        raw[0::2, 1::2], raw[1::2, 0::2] = bgr[0::2, 1::2, 1], bgr[1::2, 0::2, 1]
+        cv2.imwrite(str(path), raw * 16)
+    assert main(["validate", str(copy)]) == 0
+    mosaics = find_loops(read_dive(copy), read_prior(copy), settings=FAST)
+    found = lambda result: {(v.i, v.j) for v in result.tested if v.accepted}  # noqa: E731
+    assert len(found(colour)) > 10 and len(found(mosaics) & found(colour)) >= 0.9 * len(found(colour))
+
+
 def test_without_navigation_the_command_says_what_to_run(tiny_dive, tmp_path: Path, capsys) -> None:
     copy = tmp_path / "dive"
     shutil.copytree(tiny_dive.path, copy, ignore=shutil.ignore_patterns("products"))

@@ -419,7 +419,7 @@ def pair_dense(
                 return read_dense(cached)
             except ValueError as err:
                 log.warning("%s; recomputing", err)
-    left, right = read_grey(left_path), read_grey(right_path)
+    left, right = read_grey(left_path, rig.left.bayer), read_grey(right_path, rig.right.bayer)
     if left is None or right is None:
         return None
     check_image_size(rig.left, left.shape, str(left_path))

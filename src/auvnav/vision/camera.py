@@ -227,6 +227,7 @@ def rig_digest(rig: StereoRig) -> str:
         h.update(np.array([cam.width, cam.height], dtype=np.int64).tobytes())
         h.update(np.asarray(cam.K, dtype=float).tobytes())
         h.update(np.asarray(cam.D, dtype=float).tobytes())
+        h.update((cam.bayer or "").encode())
     h.update(np.asarray(rig.R_right_left, dtype=float).tobytes())
     h.update(np.asarray(rig.t_right_left_m, dtype=float).tobytes())
     return h.hexdigest()[:16]

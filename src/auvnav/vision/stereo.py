@@ -32,8 +32,8 @@ is the point computed, bit for bit), the two noise figures and the rectified geo
 descriptors as :func:`~auvnav.vision.features.compand_descriptors` gives them (4 bits each), and each
 match's further disparity noise (one byte), and the rectified, illumination-corrected left image at half the
 size SIFT sees, as PNG (:func:`make_thumbnail`: what the direct registration aligns). On the check
-dive at half scale a pair's file holds about 62-68 KiB of features and 36-46 KiB of thumbnail
-(turbid to clear water).
+dive at half scale in coastal water a pair's file holds about 84 KiB of features and 45 KiB of
+thumbnail (median).
 """
 
 from __future__ import annotations
@@ -50,6 +50,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from auvnav.errors import ConfigError
 from auvnav.streams import atomic_write
 from auvnav.vehicle import StereoRig
 from auvnav.vision.camera import (
@@ -66,7 +67,7 @@ from auvnav.vision.features import FeatureSettings, compand_descriptors, correct
 log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
-CACHE_VERSION = 11
+CACHE_VERSION = 12
 #: Rectified coordinates are kept on a grid of 1/GRID_PER_PX pixel (0.004 px, well under the tracker's
 #: few hundredths).
 GRID_PER_PX = 256
@@ -87,9 +88,12 @@ EDGE_SIGMA_PER_SPREAD = 1.0 / 3.0
 #: the pair's spreads (its tracking noise: 0.06-0.19 px on the check dive in clear water, 0.2-1.1 px in
 #: turbid water, 0.09 px on scenes crowded with steps, where the 0.5 px default holds).
 EDGE_NOISE_FACTOR = 5.0
-#: zlib level of the thumbnails' PNG: on half-scale check-dive images level 3 takes 2.5 ms for 37 KiB,
-#: level 9 28 ms for 35 KiB, lossless WebP 26 ms for 29 KiB (of a front end at about 0.15 CPU s a pair).
-THUMBNAIL_PNG_LEVEL = 3
+#: zlib level of the thumbnails' PNG: on half-scale turbid check-dive images level 1 takes 1.6 ms for
+#: 37.3 KiB, level 3 2.8 ms for 35.8 KiB, level 9 28 ms for 35 KiB, lossless WebP 26 ms for 29 KiB
+#: (of a front end at about 0.18 CPU s a pair).
+THUMBNAIL_PNG_LEVEL = 1
+#: zlib level of the other blobs: level 1 takes 1.5 ms a pair for 56.9 KiB, level 6 2.8 ms for 56.1 KiB.
+CACHE_ZLIB_LEVEL = 1
 _MAGIC = b"AUVNAVF8"
 # magic, matches, f, baseline, cx, cy, R1 (9), sigma common, sigma independent, thumbnail scales (2),
 # bytes of each blob (geometry, descriptors, disparity sigmas, thumbnail)
@@ -336,29 +340,29 @@ def disparity_spread(
         "criteria": (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 0.01),
     }
     h = window // 2
-    d0 = p[:, 0, 0] - q[:, 0, 0]
-    spread = np.zeros(len(p))
     if len(p) == 0:  # OpenCV refuses empty point sets
-        return spread
-    for du, dv in ((-h, 0), (h, 0), (0, -h), (0, h)):
-        shift = np.array([du, dv], dtype=np.float32)
-        ps = np.ascontiguousarray(p + shift)
-        qs, st, _ = cv2.calcOpticalFlowPyrLK(
-            left,
-            right,
-            ps,
-            np.ascontiguousarray(q + shift),
-            maxLevel=0,
-            flags=cv2.OPTFLOW_USE_INITIAL_FLOW,
-            **lk,
-        )
-        inside = (ps[:, 0, 0] >= h) & (ps[:, 0, 0] < left.shape[1] - h)
-        inside &= (ps[:, 0, 1] >= h) & (ps[:, 0, 1] < left.shape[0] - h)
-        change = np.abs(ps[:, 0, 0] - qs[:, 0, 0] - d0) + np.abs(
-            qs[:, 0, 1] - ps[:, 0, 1] - (q[:, 0, 1] - p[:, 0, 1])
-        )
-        spread = np.where(inside, np.maximum(spread, np.where(st[:, 0] == 1, change, np.inf)), spread)
-    return spread
+        return np.zeros(0)
+    # the four shifted windows of every match tracked in one call (each point is tracked on its own;
+    # one call computes the image derivatives once, not four times)
+    shifts = np.array([(-h, 0), (h, 0), (0, -h), (0, h)], dtype=np.float32)[:, None, None, :]
+    ps = np.ascontiguousarray((p[None] + shifts).reshape(-1, 1, 2))
+    qs, st, _ = cv2.calcOpticalFlowPyrLK(
+        left,
+        right,
+        ps,
+        np.ascontiguousarray((q[None] + shifts).reshape(-1, 1, 2)),
+        maxLevel=0,
+        flags=cv2.OPTFLOW_USE_INITIAL_FLOW,
+        **lk,
+    )
+    ps, qs, lost = ps.reshape(4, -1, 2), qs.reshape(4, -1, 2), st.reshape(4, -1) != 1
+    change = np.abs(ps[..., 0] - qs[..., 0] - (p[:, 0, 0] - q[:, 0, 0])) + np.abs(
+        qs[..., 1] - ps[..., 1] - (q[:, 0, 1] - p[:, 0, 1])
+    )
+    # a shifted window that would leave the image is skipped
+    inside = (ps[..., 0] >= h) & (ps[..., 0] < left.shape[1] - h)
+    inside &= (ps[..., 1] >= h) & (ps[..., 1] < left.shape[0] - h)
+    return np.where(inside, np.where(lost, np.inf, change), 0.0).max(axis=0)
 
 
 def image_shift(a: NDArray[np.uint8], b: NDArray[np.uint8], width_px: int = 170) -> tuple[float, float]:
@@ -389,16 +393,58 @@ def split_noise(dy_px: FloatArray, total: float) -> tuple[float, float]:
     return float(np.sqrt(total**2 - independent**2)), independent
 
 
-def read_grey(path: Path) -> NDArray[np.uint8] | None:
-    """An image as 8-bit grey, or None (with a warning naming it) when missing or unreadable."""
+#: A deeper image (16-bit, float) is put on 8 bits with this quantile of its grey levels at 255.
+GREY_TOP_QUANTILE = 0.999
+
+
+def read_grey(path: Path, bayer: str | None = None) -> NDArray[np.uint8] | None:
+    """An image as 8-bit grey, or None (with a warning naming it) when missing or unreadable.
+
+    The codec reduces colour to luminance (``cv2.IMREAD_GRAYSCALE``); a raw image, from a camera whose
+    colour filter ``bayer`` is given (:attr:`auvnav.vehicle.CameraModel.bayer`), is demosaiced to
+    luminance (OpenCV's bilinear ``COLOR_Bayer*2GRAY``). A deeper image (16-bit, float) is then scaled
+    by its own brightest grey levels (:data:`GREY_TOP_QUANTILE` at 255), not by its container: a
+    machine-vision camera writes 10- or 12-bit data in 16-bit files (ROS ``mono16``), which OpenCV's
+    own reduction to 8 bits (the high byte) would leave at 4 to 16 grey levels. The scale does not
+    matter beyond that: :func:`~auvnav.vision.features.correct_illumination` divides each image by its
+    own low-pass.
+
+    Raises :class:`~auvnav.errors.ConfigError` when a raw camera's image is not a one-channel 8- or
+    16-bit mosaic.
+    """
     if not path.is_file():
         log.warning("%s: image missing; pair skipped", path)
         return None
-    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    flags = cv2.IMREAD_GRAYSCALE | cv2.IMREAD_ANYDEPTH if bayer is None else cv2.IMREAD_UNCHANGED
+    image = cv2.imread(str(path), flags)
     if image is None:
         log.warning("%s: not a readable image (corrupt or unknown format); pair skipped", path)
         return None
-    return image
+    if bayer is not None:
+        if image.ndim != 2 or image.dtype not in (np.uint8, np.uint16):
+            channels = image.shape[2] if image.ndim == 3 else 1
+            raise ConfigError(
+                f"{path}: vehicle.yaml gives its camera a Bayer filter ({bayer}), but the image is not a "
+                f"raw mosaic (one channel of 8 or 16 bits; found {channels} of {image.dtype})"
+            )
+        image = cv2.cvtColor(image, _BAYER_TO_GREY[bayer])
+    if image.dtype == np.uint8:
+        return image
+    finite = np.nan_to_num(image.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+    top = float(np.quantile(finite[:: max(1, finite.shape[0] // 256)], GREY_TOP_QUANTILE))
+    if top <= 0:
+        log.warning("%s: image has no light (every grey level 0 or below); pair skipped", path)
+        return None
+    return np.clip(finite * np.float32(255.0 / top) + np.float32(0.5), 0, 255).astype(np.uint8)
+
+
+#: OpenCV's demosaicing to luminance for each colour filter (OpenCV >= 4.5 names them as cameras do).
+_BAYER_TO_GREY = {
+    "rggb": cv2.COLOR_BayerRGGB2GRAY,
+    "bggr": cv2.COLOR_BayerBGGR2GRAY,
+    "grbg": cv2.COLOR_BayerGRBG2GRAY,
+    "gbrg": cv2.COLOR_BayerGBRG2GRAY,
+}
 
 
 def cache_path(cache_dir: Path, left: Path, right: Path, rig: StereoRig, settings: FeatureSettings) -> Path:
@@ -421,11 +467,13 @@ def write_features(features: StereoFeatures, rect: Rectification, path: Path) ->
     """Write a pair's features to a cache file (atomically; the module docstring says what it holds)."""
     grid = np.round(features.uv_rect_px * GRID_PER_PX).astype("<i4")
     # The bytes of each coordinate together (their high bytes alike): a third smaller once compressed.
-    geometry = zlib.compress(grid.view(np.uint8).reshape(len(grid), 4, 4).transpose(1, 2, 0).tobytes(), 6)
+    geometry = zlib.compress(
+        grid.view(np.uint8).reshape(len(grid), 4, 4).transpose(1, 2, 0).tobytes(), CACHE_ZLIB_LEVEL
+    )
     q = features.descriptors
-    descriptors = zlib.compress((q[:, ::2] << 4 | q[:, 1::2]).astype(np.uint8).tobytes(), 6)
+    descriptors = zlib.compress((q[:, ::2] << 4 | q[:, 1::2]).astype(np.uint8).tobytes(), CACHE_ZLIB_LEVEL)
     assert features.disparity_sigma_px is not None  # StereoFeatures fills it
-    sigmas = zlib.compress(_sigma_bytes(features.disparity_sigma_px).tobytes(), 6)
+    sigmas = zlib.compress(_sigma_bytes(features.disparity_sigma_px).tobytes(), CACHE_ZLIB_LEVEL)
     thumb = features.thumbnail or b""
     header = _HEADER.pack(
         _MAGIC,
@@ -500,7 +548,7 @@ def pair_features(
                 return read_features(cached)
             except (OSError, ValueError) as err:
                 log.warning("%s: unreadable feature cache (%s); recomputing", cached, err)
-    left, right = read_grey(left_path), read_grey(right_path)
+    left, right = read_grey(left_path, rig.left.bayer), read_grey(right_path, rig.right.bayer)
     if left is None or right is None:
         return None
     check_image_size(rig.left, left.shape, str(left_path))
