@@ -453,10 +453,12 @@ def write_bag(
     images: int = 4,
     image_bytes: bytes | None = None,
     altitude: bool = True,
+    raw: tuple[str, str] | None = None,
 ) -> None:
     """The dive's streams as ROS messages (REP-103 frames: ENU world, FLU body): DVL twist, Imu,
     FluidPressure (absolute), NavSatFix, Range (altitude) and the first ``images`` stereo pairs as
-    CompressedImage."""
+    CompressedImage, or, with ``raw`` (the left and right encodings, 16-bit: ``mono16``,
+    ``bayer_rggb16``), as Image holding :func:`raw_image` of the pair's number."""
     from rosbags.typesys import Stores, get_typestore
 
     from auvnav.frames import euler2rot, rot2quat_wxyz
@@ -565,7 +567,26 @@ def write_bag(
                     ),
                 )
             )
-    if dive.images is not None and images:
+    if dive.images is not None and images and raw is not None:
+        for k, t in enumerate(dive.images.t_s[:images]):
+            for side, encoding in zip(("left", "right"), raw, strict=True):
+                pixels = raw_image(k)
+                msgs.append(
+                    (
+                        t,
+                        f"/stereo/{side}/image_raw",
+                        T["sensor_msgs/msg/Image"](
+                            header=header(t, "camera"),
+                            height=pixels.shape[0],
+                            width=pixels.shape[1],
+                            encoding=encoding,
+                            is_bigendian=0,
+                            step=2 * pixels.shape[1],
+                            data=np.frombuffer(pixels.astype("<u2").tobytes(), dtype=np.uint8),
+                        ),
+                    )
+                )
+    elif dive.images is not None and images:
         data = np.frombuffer(image_bytes or b"\xff\xd8\xff\xe0fake-jpeg\xff\xd9", dtype=np.uint8)
         for t in dive.images.t_s[:images]:
             for topic in ("/stereo/left/image_raw/compressed", "/stereo/right/image_raw/compressed"):
@@ -580,6 +601,11 @@ def write_bag(
                 )
     msgs.sort(key=lambda m: m[0])
     _write_messages(path, msgs, ts, ros1)
+
+
+def raw_image(k: int) -> np.ndarray:
+    """A 12-bit test picture the size of the default rig's images (uint16), different for each ``k``."""
+    return (np.random.default_rng(k).random((1024, 1360)) * 4095).astype(np.uint16)
 
 
 def _write_messages(path: Path, msgs: list, ts, ros1: bool) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -105,6 +106,37 @@ def test_csv_round_trip(simulated, written, tmp_path: Path) -> None:
     np.testing.assert_allclose(imported.pressure.t_s, dive.pressure.t_s, atol=1e-6)  # GPS week and seconds
     np.testing.assert_allclose(imported.attitude.heading_rad, dive.attitude.heading_rad, atol=1e-12)
     assert_same_navigation(navigate(out, simulated.truth), simulated.nav)
+
+
+def test_rosbag_raw_images_keep_their_mosaic_and_the_vehicle_its_filter(
+    simulated, exportable, tmp_path: Path
+) -> None:
+    """A raw colour camera on a ROS topic (``bayer_rggb16``, as camera drivers publish ``image_raw``)
+    and a monochrome one (``mono16``): the files hold the sensor's values as they were, and the
+    vehicle's stereo rig learns the left camera's filter; without a rig, the summary says what to add."""
+    from io_writers import raw_image, write_bag
+
+    from auvnav.vehicle import read_vehicle
+
+    bag = tmp_path / "raw_bag"
+    write_bag(simulated.dive, bag, version=2, images=3, raw=("bayer_rggb16", "mono16"))
+    settings = _settings(
+        tmp_path / "ros.yaml",
+        f"heading_reference: magnetic\ndeclination_deg: {_declination_deg(simulated.dive)!r}\n",
+    )
+    out = tmp_path / "imported"
+    summary = import_dive("rosbag", [bag], out, config=settings, base=exportable.path)
+    imported = read_dive(out)
+    assert len(imported.images) == 3
+    for k, (left, right) in enumerate(zip(imported.images.left, imported.images.right, strict=True)):
+        for name in (left, right):
+            pixels = cv2.imread(str(out / "images" / str(name)), cv2.IMREAD_UNCHANGED)
+            assert pixels.dtype == np.uint16 and np.array_equal(pixels, raw_image(k))
+    rig = read_vehicle(out / "vehicle.yaml").stereo
+    assert rig is not None and (rig.left.bayer, rig.right.bayer) == ("rggb", None)
+    assert any("raw rggb mosaics" in note for note in summary["notes"])
+    bare = import_dive("rosbag", [bag], tmp_path / "bare", config=settings, base=simulated.path)
+    assert any("left_bayer: rggb" in note for note in bare["notes"])
 
 
 @pytest.mark.parametrize("version", [1, 2], ids=["ros1", "ros2"])

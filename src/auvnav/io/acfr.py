@@ -15,7 +15,8 @@ converter and parser, whose README gives an example of each line):
   pressure by TEOS-10 at the origin's latitude;
 - ``VIS: t [t] NAME exp: E`` — one line per camera image; the left and right images of a pair share
   their time and are told apart by their names (``left_pattern``/``right_pattern``, regular
-  expressions; default ``LC`` and ``RM``, Sirius's names);
+  expressions; default ``LC`` and ``RM``, Sirius's names: a left colour camera that writes its
+  sensor's raw mosaic, which vehicle.yaml's ``stereo.left_bayer`` names, and a right monochrome one);
 - ``SSBL_FIX: t ship_x: .. ship_y: .. target_x: N target_y: E target_z: D ...`` — the vehicle's
   USBL position, metres north and east of the origin and depth;
 - ``GPS_RMC: t Lat:L N Lon:L E Bad:0 A Spd:.. Crs:.. Mg:..`` — a GPS fix, degrees with hemisphere

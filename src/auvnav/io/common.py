@@ -249,6 +249,9 @@ class Imported:
         Things worth saying.
     images_dir : Path, optional
         A staging folder holding the image files the index names (moved into ``images/``).
+    image_bayer : dict
+        The colour filter (:attr:`auvnav.vehicle.CameraModel.bayer`) of each side (``left``,
+        ``right``) whose images are raw mosaics.
     """
 
     streams: dict[str, Stream] = field(default_factory=dict)
@@ -264,6 +267,7 @@ class Imported:
     counts: Counts = field(default_factory=Counts)
     notes: list[str] = field(default_factory=list)
     images_dir: Path | None = None
+    image_bayer: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -424,6 +428,29 @@ def _depth_to_pressure(imported: Imported, origin: GeodeticOrigin) -> Stream | N
     )
 
 
+def _with_image_filters(vehicle: Vehicle, rule: str, filters: dict[str, str], notes: list[str]) -> Vehicle:
+    """The vehicle with the colour filters of the sides whose images the sources give as raw mosaics
+    (a vehicle file that names another filter is an error); without a stereo rig, a note says what to
+    add to it."""
+    if not filters:
+        return vehicle
+    stereo = vehicle.stereo
+    if stereo is None:
+        keys = ", ".join(f"{side}_bayer: {pattern}" for side, pattern in sorted(filters.items()))
+        notes.append(f"the images are raw mosaics: give the stereo calibration in vehicle.yaml with {keys}")
+        return vehicle
+    cameras = {"left": stereo.left, "right": stereo.right}
+    for side, pattern in filters.items():
+        if cameras[side].bayer not in (None, pattern):
+            raise ConfigError(
+                f"{rule}: stereo.{side}_bayer is {cameras[side].bayer} but the {side} images are raw "
+                f"{pattern} mosaics"
+            )
+        cameras[side] = dataclasses.replace(cameras[side], bayer=pattern)
+        notes.append(f"the {side} images are raw {pattern} mosaics (vehicle.yaml: stereo.{side}_bayer)")
+    return dataclasses.replace(vehicle, stereo=dataclasses.replace(stereo, **cameras))
+
+
 def assemble(
     imported: Imported,
     settings: ImportSettings,
@@ -509,6 +536,8 @@ def assemble(
     else:
         vehicle, vehicle_rule = Vehicle(), "the default vehicle (no lever arms, no stereo rig)"
         notes.append("no vehicle file: the default vehicle is written (give vehicle: FILE in --config)")
+
+    vehicle = _with_image_filters(vehicle, vehicle_rule, imported.image_bayer, notes)
 
     # Fix sigmas where the format gives none (a NaN sigma from the reader).
     for key, sigma in (

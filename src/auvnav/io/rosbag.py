@@ -15,7 +15,8 @@ that type; several are an error that lists them):
 - ``altitude_topic``: ``sensor_msgs/Range`` (the DVL's altitude, interpolated at its samples);
 - ``left_image_topic``, ``right_image_topic``: ``sensor_msgs/Image`` or ``CompressedImage``; by
   default the two image topics, told apart by ``left``/``right`` in their names. A compressed
-  image is written as it is (its ``format`` gives the extension); a raw image is written as PNG.
+  image is written as it is (its ``format`` gives the extension); a raw image is written as PNG, a
+  Bayer mosaic (``bayer_rggb8`` ... ``bayer_gbrg16``) as it is, its filter put on the vehicle's camera.
   Left and right images pair when their stamps are within ``pair_tolerance_s``; unpaired images are
   counted and not kept.
 
@@ -33,7 +34,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
@@ -44,6 +45,7 @@ from auvnav.dive import AttitudeStream, DvlStream, GpsStream, PressureStream
 from auvnav.errors import ConfigError
 from auvnav.frames import quat_wxyz2rot, rot2euler
 from auvnav.io.common import DBAR, FormatError, ImportContext, Imported, ImportSettings, images_index
+from auvnav.vehicle import BAYER_PATTERNS
 
 TWIST = ("geometry_msgs/msg/TwistWithCovarianceStamped", "geometry_msgs/msg/TwistStamped")
 ODOMETRY = "nav_msgs/msg/Odometry"
@@ -142,11 +144,13 @@ def _choose(connections: list[Any], settings: RosbagSettings) -> dict[str, Any]:
 
 @dataclass
 class _Images:
-    """Image files written as they arrive, paired at the end."""
+    """Image files written as they arrive, paired at the end; the colour filter of each side whose
+    images are raw mosaics (ROS ``bayer_*`` encodings), None for the others."""
 
     folder: Path
     left: list[tuple[float, str]]
     right: list[tuple[float, str]]
+    bayer: dict[str, set[str | None]] = field(default_factory=lambda: {"left": set(), "right": set()})
 
     def write(self, side: str, t: float, msg: Any) -> None:
         name = f"{side}/{len(getattr(self, side)):06d}"
@@ -154,44 +158,66 @@ class _Images:
             fmt = str(msg.format).lower()
             ext = ".png" if "png" in fmt else ".jpg"
             (self.folder / (name + ext)).write_bytes(bytes(msg.data))
+            self.bayer[side].add(None)
         else:
             ext = ".png"
-            _write_raw(self.folder / (name + ext), msg)
+            self.bayer[side].add(_write_raw(self.folder / (name + ext), msg))
         getattr(self, side).append((t, name + ext))
 
+    def filters(self) -> dict[str, str]:
+        """The colour filter of each side whose images are all raw mosaics of one filter."""
+        out = {}
+        for side, seen in self.bayer.items():
+            if len(seen) > 1:
+                names = ", ".join(sorted(f"bayer_{s}" if s else "demosaiced" for s in seen))
+                raise ConfigError(
+                    f"rosbag: the {side} images change encoding ({names}): one camera, one kind"
+                )
+            if seen and None not in seen:
+                out[side] = str(next(iter(seen)))
+        return out
 
-def _write_raw(path: Path, msg: Any) -> None:
+
+#: ROS ``sensor_msgs/Image`` encodings read, and their channels.
+_CHANNELS = {
+    "mono8": 1,
+    "8uc1": 1,
+    "bgr8": 3,
+    "rgb8": 3,
+    "8uc3": 3,
+    "mono16": 1,
+    "16uc1": 1,
+    "bgra8": 4,
+    "rgba8": 4,
+}
+_CHANNELS.update({f"bayer_{p}{bits}": 1 for p in BAYER_PATTERNS for bits in (8, 16)})
+
+
+def _write_raw(path: Path, msg: Any) -> str | None:
+    """Write a raw ``sensor_msgs/Image`` as PNG (a Bayer mosaic as it is); its colour filter if it
+    is one (``bayer_rggb8`` -> ``rggb``), else None."""
     import cv2
 
     enc = str(msg.encoding).lower()
-    channels = {
-        "mono8": 1,
-        "8uc1": 1,
-        "bgr8": 3,
-        "rgb8": 3,
-        "8uc3": 3,
-        "mono16": 1,
-        "16uc1": 1,
-        "bgra8": 4,
-        "rgba8": 4,
-    }
-    if enc not in channels:
+    if enc not in _CHANNELS:
         raise ConfigError(
-            f"rosbag: image encoding {quote(msg.encoding)} is not supported (mono8/16, bgr8, rgb8, bgra8, rgba8)"
+            f"rosbag: image encoding {quote(msg.encoding)} is not supported (mono8/16, bgr8, rgb8, bgra8, "
+            "rgba8, bayer_*8/16)"
         )
     dtype = np.uint16 if "16" in enc else np.uint8
     row = np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(msg.height, msg.step)
-    img = row[:, : msg.width * channels[enc] * np.dtype(dtype).itemsize].copy().view(dtype)
+    img = row[:, : msg.width * _CHANNELS[enc] * np.dtype(dtype).itemsize].copy().view(dtype)
     if dtype == np.uint16 and msg.is_bigendian:
         img = img.byteswap()
     img = (
-        img.reshape(msg.height, msg.width, channels[enc])
-        if channels[enc] > 1
+        img.reshape(msg.height, msg.width, _CHANNELS[enc])
+        if _CHANNELS[enc] > 1
         else img.reshape(msg.height, msg.width)
     )
     if enc.startswith("rgb"):
-        img = img[..., ::-1] if channels[enc] == 3 else img[..., [2, 1, 0, 3]]
+        img = img[..., ::-1] if _CHANNELS[enc] == 3 else img[..., [2, 1, 0, 3]]
     cv2.imwrite(str(path), img)
+    return enc[6 : -2 if enc.endswith("16") else -1] if enc.startswith("bayer_") else None
 
 
 def _stamp(msg: Any, t_bag_ns: int, source: str) -> float:
@@ -358,6 +384,7 @@ def read(sources: list[Path], settings: RosbagSettings, context: ImportContext) 
         if index is not None:
             imported.streams["images"] = index
             imported.images_dir = images.folder
+            imported.image_bayer = images.filters()
     imported.heading_rule = "a ROS bag does not say which north its orientation refers to"
     return imported
 
