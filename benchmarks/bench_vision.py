@@ -14,8 +14,9 @@ Steps (simulation, rendering and navigation are skipped when their outputs alrea
    peak memory of each loop stage (the stage and its worker processes together).
 
 Usage: ``.venv/bin/python benchmarks/bench_vision.py [--work DIR] [--image-scale 0.5] [--water clear]
-[--seconds S] [--speed-seconds 900] [--set NAME=VALUE ...]``: ``--water coastal|turbid`` renders the
-dive in that water (``auvnav simulate --water``; the work folder gets a folder per water),
+[--raw] [--seconds S] [--speed-seconds 900] [--set NAME=VALUE ...]``: ``--water coastal|turbid`` renders
+the dive in that water (``auvnav simulate --water``; the work folder gets a folder per water), ``--raw``
+as raw 12-bit RGGB mosaics (``auvnav simulate --raw-images``: what survey cameras write),
 ``--seconds`` cuts the half-scale dive after S s of vehicle time (the issue-20 figures are on the
 first 900 s: ``--seconds 900 --speed-seconds 0``), ``--speed-seconds 0`` skips step 4, ``--set``
 gives the loop stage's settings (``auvnav loops --help``), e.g. ``--set features=2000`` or ``--set
@@ -58,10 +59,12 @@ def run(args: list[str]) -> None:
     subprocess.run([str(a) for a in args], check=True, cwd=ROOT)
 
 
-def render(dive: Path, scale: float, seconds: float | None, water: str = "clear") -> dict[str, float]:
+def render(
+    dive: Path, scale: float, seconds: float | None, water: str = "clear", raw: bool = False
+) -> dict[str, float]:
     """Simulate and render a dive (when absent); the rendering speed."""
     from auvnav.executor import make_executor
-    from auvnav.sim.camera import render_dive_images
+    from auvnav.sim.camera import Lighting, render_dive_images, water_type
 
     if not (dive / "truth").is_dir():
         extra = [] if seconds is None else ["--duration-s", str(seconds)]
@@ -71,7 +74,8 @@ def render(dive: Path, scale: float, seconds: float | None, water: str = "clear"
         return {}
     started = time.perf_counter()
     with make_executor() as executor:
-        images = render_dive_images(dive, scale=scale, water=water, executor=executor)  # type: ignore[arg-type]
+        lighting = Lighting(water=water_type(water), raw=raw)  # type: ignore[arg-type]
+        images = render_dive_images(dive, scale=scale, lighting=lighting, executor=executor)
     elapsed = time.perf_counter() - started
     return {"rendered_pairs": len(images), "render_s": elapsed, "render_pairs_per_s": len(images) / elapsed}
 
@@ -150,6 +154,7 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=None, help="cut the half-scale dive (vehicle time)")
     parser.add_argument("--speed-seconds", type=float, default=900.0, help="0: no full-scale run")
     parser.add_argument("--water", choices=("clear", "coastal", "turbid"), default="clear")
+    parser.add_argument("--raw", action="store_true", help="raw 12-bit RGGB mosaics, not colour images")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
     args = parser.parse_args()
     from auvnav.config import parse_yaml
@@ -161,7 +166,7 @@ def main() -> None:
     args.work.mkdir(parents=True, exist_ok=True)
     print(f"cores {os.cpu_count()}, load average {os.getloadavg()}", flush=True)
 
-    water = "" if args.water == "clear" else f"-{args.water}"
+    water = ("" if args.water == "clear" else f"-{args.water}") + ("-raw" if args.raw else "")
     cut = "" if args.seconds is None else f"-{args.seconds:.0f}s"
     dive = args.work / f"navcheck{water}{cut}"
     results: dict[str, object] = {
@@ -170,13 +175,13 @@ def main() -> None:
         "settings": values,
         "load_average": os.getloadavg(),
     }
-    results.update(render(dive, args.image_scale, args.seconds, args.water))
+    results.update(render(dive, args.image_scale, args.seconds, args.water, args.raw))
     with TreeUsage() as usage:
         results["half"] = loops(dive, usage, fresh=True, settings=settings)
     results["half_peak_memory_mib"] = usage.peak_mib
     if args.speed_seconds > 0:
         cut = args.work / f"navcheck{water}-{args.speed_seconds:.0f}s-x1"
-        results["full_render"] = render(cut, 1.0, args.speed_seconds, args.water)
+        results["full_render"] = render(cut, 1.0, args.speed_seconds, args.water, args.raw)
         with TreeUsage() as usage:
             results["full"] = loops(cut, usage, fresh=True, settings=settings)
         results["full_peak_memory_mib"] = usage.peak_mib

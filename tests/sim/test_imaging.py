@@ -52,6 +52,30 @@ def test_colour_render_and_monochrome_camera(level_floor) -> None:
     assert grey.shape == (154, 204)
 
 
+def test_a_raw_camera_writes_the_mosaic_its_colour_image_is_made_from(level_floor, tmp_path) -> None:
+    """``Lighting(raw=True)``: the same exposure (same noise) as the colour camera's, before its
+    demosaicing, at 12 bits; read back by its filter it is the colour image's luminance."""
+    import cv2
+
+    from auvnav.sim.camera import to_grey
+    from auvnav.vision.stereo import read_grey
+
+    floor = level_floor(20.0)
+    colour, _ = render_stereo_pair(floor, SeafloorTexture(seed=1), RIG, pose(20.0))
+    raw, _ = render_stereo_pair(floor, SeafloorTexture(seed=1), RIG, pose(20.0), lighting=Lighting(raw=True))
+    assert raw.shape == colour.shape[:2] and raw.dtype == np.uint16 and raw.max() <= 4095
+    assert raw.max() > 255  # 12 bits, not 8
+    # the red sites hold the colour image's red, 16 levels a DN
+    assert raw[0::2, 0::2].mean() / 16 == pytest.approx(colour[0::2, 0::2, 2].mean(), abs=1.0)
+    cv2.imwrite(str(tmp_path / "raw.png"), raw)
+    grey, truth = read_grey(tmp_path / "raw.png", "rggb"), to_grey(colour)
+    assert grey is not None
+    inner = (slice(2, -2), slice(2, -2))
+    assert np.corrcoef(grey[inner].ravel(), truth[inner].ravel())[0, 1] > 0.98
+    with pytest.raises(ValueError, match="colour"):
+        Lighting(raw=True, bayer=False)
+
+
 def test_turbid_water_adds_a_veil_and_blurs() -> None:
     """Backscatter along a ray to a floor 2 m away, and the share of the returning light that arrives
     unscattered (sharp): more veil and less sharp light in turbid than in clear water."""

@@ -173,6 +173,14 @@ def simulate(
             "with scattering, backscatter and the camera's gain to match.",
         ),
     ] = WaterOpt.clear,
+    raw_images: Annotated[
+        bool,
+        typer.Option(
+            "--raw-images",
+            help="Write the sensor's raw RGGB mosaics at 12 bits (16-bit PNG), as survey cameras do, "
+            "instead of demosaiced colour images; vehicle.yaml names the filter.",
+        ),
+    ] = False,
     truth_loops: Annotated[
         bool,
         typer.Option("--truth-loops", help="Write truth/loops.csv: loop closures from the truth."),
@@ -261,7 +269,15 @@ def simulate(
             summary = simulate_fn(scenario, out, progress=progress, **options)
     if images:
         summary["images"] = _render_images(
-            out, image_scale, image_rate_hz, seed, as_json or quiet, workers, scheduler, water.value
+            out,
+            image_scale,
+            image_rate_hz,
+            seed,
+            as_json or quiet,
+            workers,
+            scheduler,
+            water.value,
+            raw_images,
         )
     end = summary["end_error_m"]
     human = (
@@ -332,10 +348,11 @@ def _render_images(
     workers: int | None,
     scheduler: str | None,
     water: str = "clear",
+    raw: bool = False,
 ) -> int:
     """Render a simulated dive's stereo images (with a progress bar unless silent); the pair count."""
     from auvnav.executor import make_executor
-    from auvnav.sim.camera import render_dive_images
+    from auvnav.sim.camera import Lighting, render_dive_images, water_type
 
     if not 0 < scale <= 4 or rate_hz <= 0:
         raise typer.BadParameter("--image-scale must be in (0, 4] and --image-rate-hz positive")
@@ -345,7 +362,7 @@ def _render_images(
             scale=scale,
             rate_hz=rate_hz,
             seed=seed,
-            water=water,  # type: ignore[arg-type]
+            lighting=Lighting(water=water_type(water), raw=raw),  # type: ignore[arg-type]
             executor=executor,
             progress=None if progress is None else (lambda done, total: progress("rendering", done, total)),
         )

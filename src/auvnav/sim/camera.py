@@ -261,6 +261,9 @@ class Lighting:
         Exposure (the strobe's flash), seconds: motion blur at the vehicle's speed.
     bayer : bool
         A colour camera (RGGB Bayer mosaic, demosaiced: BGR images), else a monochrome one (grey).
+    raw : bool
+        A colour camera that writes its sensor's raw RGGB mosaic at 12 bits (one channel, uint16), as
+        survey cameras do, instead of the demosaiced 8-bit colour image.
     """
 
     lamps_body_m: FloatArray = field(default_factory=lambda: np.array([[1.0, 0.0, 0.2], [-0.5, 0.0, 0.2]]))
@@ -274,8 +277,11 @@ class Lighting:
     max_gain: float = 8.0
     flash_s: float = FLASH_S
     bayer: bool = True
+    raw: bool = False
 
     def __post_init__(self) -> None:
+        if self.raw and not self.bayer:
+            raise ValueError("raw images need a colour (Bayer) camera")
         lamps = np.asarray(self.lamps_body_m)
         if lamps.ndim != 2 or lamps.shape[1] != 3 or lamps.shape[0] < 1:
             raise ValueError(f"lamps_body_m must have shape (k, 3), k >= 1; found {lamps.shape}")
@@ -298,7 +304,13 @@ class Lighting:
             "full_well_e": self.full_well_e,
             "read_noise_e": self.read_noise_e,
             "flash_s": self.flash_s,
-            "sensor": "RGGB Bayer, demosaiced (OpenCV edge-aware)" if self.bayer else "monochrome",
+            "sensor": (
+                "RGGB Bayer, raw 12-bit mosaic"
+                if self.raw
+                else "RGGB Bayer, demosaiced (OpenCV edge-aware)"
+                if self.bayer
+                else "monochrome"
+            ),
             "forward_scatter": [{"sigma_rad": s, "fraction": f} for s, f in FORWARD_SCATTER],
         }
 
@@ -371,8 +383,8 @@ def render_view(
     rng: np.random.Generator,
     *,
     v_ned_mps: FloatArray | None = None,
-) -> NDArray[np.uint8]:
-    """One 8-bit image from a camera at ``T_ned_cam`` (4x4) on a vehicle at ``T_ned_body``.
+) -> NDArray:
+    """One image from a camera at ``T_ned_cam`` (4x4) on a vehicle at ``T_ned_body``.
 
     The image is formed as the Jaffe-McGlamery model has it (Jaffe 1990, "Computer modeling and the
     design of optimal underwater imaging systems", IEEE J. Oceanic Eng. 15(2)), in each of the red,
@@ -390,7 +402,8 @@ def render_view(
 
     Returns
     -------
-    ndarray, uint8: (H, W, 3) BGR for a colour camera (``lighting.bayer``), else (H, W) grey.
+    ndarray, uint8: (H, W, 3) BGR for a colour camera (``lighting.bayer``), else (H, W) grey;
+    uint16 (H, W), the raw 12-bit RGGB mosaic, with ``lighting.raw``.
     """
     step = max(2, round(cam.width / COARSE_GRID_COLUMNS))
     coarse = _grid_rays(cam, step)
@@ -493,9 +506,14 @@ def _motion_blur(
     return cv2.filter2D(image, -1, kernel, borderType=cv2.BORDER_REFLECT)
 
 
-def _expose(radiance: NDArray[np.float32], lighting: Lighting, rng: np.random.Generator) -> NDArray[np.uint8]:
+#: A raw (12-bit) image's levels per 8-bit DN.
+RAW_PER_DN = 16
+
+
+def _expose(radiance: NDArray[np.float32], lighting: Lighting, rng: np.random.Generator) -> NDArray:
     """The sensor: electrons (shot noise), read noise, 8-bit quantisation; a colour camera samples one
-    band per pixel through an RGGB Bayer mosaic and demosaics it (OpenCV's edge-aware interpolation)."""
+    band per pixel through an RGGB Bayer mosaic and demosaics it (OpenCV's edge-aware interpolation),
+    or (``lighting.raw``) gives the mosaic itself at 12 bits."""
     e_per_dn = lighting.full_well_e / 255.0 / _gain(lighting)
     if lighting.bayer:
         h, w = radiance.shape[:2]
@@ -509,6 +527,8 @@ def _expose(radiance: NDArray[np.float32], lighting: Lighting, rng: np.random.Ge
     dn = np.maximum(dn, 0.0)
     sigma = np.sqrt(dn / np.float32(e_per_dn) + np.float32((lighting.read_noise_e / e_per_dn) ** 2))
     dn += sigma * rng.standard_normal(dn.shape, dtype=np.float32)
+    if lighting.raw:
+        return np.clip(np.rint(dn * np.float32(RAW_PER_DN)), 0, 4095).astype(np.uint16)
     raw = np.clip(np.rint(dn), 0, 255).astype(np.uint8)
     if not lighting.bayer:
         return raw
@@ -617,7 +637,7 @@ def render_stereo_pair(
     lighting: Lighting | None = None,
     rng: np.random.Generator | None = None,
     v_ned_mps: FloatArray | None = None,
-) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
+) -> tuple[NDArray, NDArray]:
     """Render the left and right images of a stereo rig on a vehicle at ``T_ned_body``.
 
     Parameters
@@ -638,7 +658,7 @@ def render_stereo_pair(
     Returns
     -------
     left, right : ndarray, uint8, shape (height, width, 3) BGR (colour camera, the default) or
-        (height, width) (``lighting.bayer`` False)
+        (height, width) (``lighting.bayer`` False); uint16 (height, width) raw mosaics (``lighting.raw``)
     """
     lighting = lighting or Lighting()
     rng = rng or np.random.default_rng(0)
@@ -970,5 +990,11 @@ def render_dive_images(
     text = dump_yaml(imaging)
     atomic_write(dive_path / "truth" / "imaging.yaml", lambda p: p.write_text(text, encoding="utf-8"))
     vehicle_file = dive_path / (vehicle_file_name(dive_path) or "vehicle.yaml")
+    if lighting.raw:  # the vehicle file names the cameras' colour filter
+        rig = dataclasses.replace(
+            rig,
+            left=dataclasses.replace(rig.left, bayer="rggb"),
+            right=dataclasses.replace(rig.right, bayer="rggb"),
+        )
     write_vehicle(dataclasses.replace(read_vehicle(vehicle_file), stereo=rig), vehicle_file)
     return index
