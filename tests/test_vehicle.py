@@ -61,13 +61,18 @@ def test_bad_vehicle_files_are_one_line_errors(tmp_path: Path, data: dict, expec
     assert expected in message and len(message.splitlines()) == 1 and "vehicle.yaml" in message
 
 
-def test_opencv_filestorage_stereo(tmp_path: Path) -> None:
-    fs = cv2.FileStorage(str(tmp_path / "stereo.yml"), cv2.FILE_STORAGE_WRITE)
+def _write_opencv_stereo(path: Path) -> None:
+    """A stereo calibration as OpenCV's samples write it (M1, D1, M2, D2, R, T, image size)."""
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
     fs.write("image_width", 1360)
     fs.write("image_height", 1024)
     for name, m in [("M1", K), ("D1", D), ("M2", K), ("D2", D), ("R", R_RL), ("T", T_RL.reshape(3, 1))]:
         fs.write(name, m)
     fs.release()
+
+
+def test_opencv_filestorage_stereo(tmp_path: Path) -> None:
+    _write_opencv_stereo(tmp_path / "stereo.yml")
     v = read_vehicle(
         _write(tmp_path, {"stereo": {"calibration_file": "stereo.yml", "calibration_format": "opencv"}})
     )
@@ -84,12 +89,7 @@ def test_a_raw_colour_camera_keeps_its_bayer_filter(tmp_path: Path) -> None:
     monochrome right one; the filter survives the round trip and enters the cache key."""
     from auvnav.vision.camera import rig_digest
 
-    fs = cv2.FileStorage(str(tmp_path / "stereo.yml"), cv2.FILE_STORAGE_WRITE)
-    fs.write("image_width", 1360)
-    fs.write("image_height", 1024)
-    for name, m in [("M1", K), ("D1", D), ("M2", K), ("D2", D), ("R", R_RL), ("T", T_RL.reshape(3, 1))]:
-        fs.write(name, m)
-    fs.release()
+    _write_opencv_stereo(tmp_path / "stereo.yml")
     stereo = {"calibration_file": "stereo.yml", "calibration_format": "opencv"}
     plain = read_vehicle(_write(tmp_path, {"stereo": stereo}))
     v = read_vehicle(_write(tmp_path, {"stereo": {**stereo, "left_bayer": "rggb"}}))

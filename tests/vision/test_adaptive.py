@@ -15,6 +15,7 @@ from auvnav.sim.camera import (
     camera_poses,
     default_stereo_rig,
     render_stereo_pair,
+    rggb_mosaic,
     scale_camera_rig,
     to_grey,
 )
@@ -96,10 +97,7 @@ def test_a_raw_mosaic_is_demosaiced_to_the_picture_the_camera_saw(level_floor, t
     rig = scale_camera_rig(default_stereo_rig(), 0.25)
     T = se3(euler2rot(0.3, 0.0, 0.0), np.array([0.0, 0.0, 18.0]))
     colour, _ = render_stereo_pair(level_floor(20.0), SeafloorTexture(seed=2, bare_fraction=0.0), rig, T)
-    raw = np.empty(colour.shape[:2], np.uint16)
-    raw[0::2, 0::2], raw[1::2, 1::2] = colour[0::2, 0::2, 2], colour[1::2, 1::2, 0]  # BGR: red, blue
-    raw[0::2, 1::2], raw[1::2, 0::2] = colour[0::2, 1::2, 1], colour[1::2, 0::2, 1]
-    cv2.imwrite(str(tmp_path / "raw.png"), raw * 16)
+    cv2.imwrite(str(tmp_path / "raw.png"), rggb_mosaic(colour[..., ::-1]).astype(np.uint16) * 16)
     truth = to_grey(colour)[2:-2, 2:-2].astype(float)
 
     def agreement(bayer: str | None) -> tuple[float, float]:

@@ -13,7 +13,7 @@ import pytest
 from auvnav.cli import main
 from auvnav.dive import read_dive
 from auvnav.evaluate import read_truth
-from auvnav.sim.camera import default_stereo_rig
+from auvnav.sim.camera import default_stereo_rig, rggb_mosaic
 from auvnav.vehicle import read_vehicle, write_vehicle
 from auvnav.vision.camera import rectification
 from auvnav.vision.evaluate import loops_section
@@ -182,10 +182,7 @@ def test_a_dive_of_raw_mosaics_finds_the_loops_of_its_colour_images(
     assert not (copy / "products" / "vision").exists()
     for path in sorted((copy / "images").glob("*/*.png")):
         bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
-        raw = np.empty(bgr.shape[:2], np.uint16)
-        raw[0::2, 0::2], raw[1::2, 1::2] = bgr[0::2, 0::2, 2], bgr[1::2, 1::2, 0]
-        raw[0::2, 1::2], raw[1::2, 0::2] = bgr[0::2, 1::2, 1], bgr[1::2, 0::2, 1]
-        cv2.imwrite(str(path), raw * 16)
+        cv2.imwrite(str(path), rggb_mosaic(bgr[..., ::-1]).astype(np.uint16) * 16)
     assert main(["validate", str(copy)]) == 0
     mosaics = find_loops(read_dive(copy), read_prior(copy), settings=FAST)
     found = lambda result: {(v.i, v.j) for v in result.tested if v.accepted}  # noqa: E731

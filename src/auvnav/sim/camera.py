@@ -506,6 +506,17 @@ def _motion_blur(
     return cv2.filter2D(image, -1, kernel, borderType=cv2.BORDER_REFLECT)
 
 
+def rggb_mosaic(rgb: NDArray) -> NDArray:
+    """What an RGGB Bayer sensor samples of an image (H, W, 3; red, green, blue): one band per pixel,
+    red at the top-left corner, blue diagonally below it, green at the other two (H, W; same dtype)."""
+    out = np.empty(rgb.shape[:2], dtype=rgb.dtype)
+    out[0::2, 0::2] = rgb[0::2, 0::2, 0]
+    out[0::2, 1::2] = rgb[0::2, 1::2, 1]
+    out[1::2, 0::2] = rgb[1::2, 0::2, 1]
+    out[1::2, 1::2] = rgb[1::2, 1::2, 2]
+    return out
+
+
 #: A raw (12-bit) image's levels per 8-bit DN.
 RAW_PER_DN = 16
 
@@ -516,12 +527,7 @@ def _expose(radiance: NDArray[np.float32], lighting: Lighting, rng: np.random.Ge
     or (``lighting.raw``) gives the mosaic itself at 12 bits."""
     e_per_dn = lighting.full_well_e / 255.0 / _gain(lighting)
     if lighting.bayer:
-        h, w = radiance.shape[:2]
-        dn = np.empty((h, w), dtype=np.float32)
-        dn[0::2, 0::2] = radiance[0::2, 0::2, 0]  # R G
-        dn[0::2, 1::2] = radiance[0::2, 1::2, 1]  # G B
-        dn[1::2, 0::2] = radiance[1::2, 0::2, 1]
-        dn[1::2, 1::2] = radiance[1::2, 1::2, 2]
+        dn = rggb_mosaic(radiance)
     else:
         dn = radiance @ np.array(LUMA_RGB, dtype=np.float32)
     dn = np.maximum(dn, 0.0)
