@@ -430,12 +430,13 @@ def read_grey(path: Path, bayer: str | None = None) -> NDArray[np.uint8] | None:
         image = cv2.cvtColor(image, _BAYER_TO_GREY[bayer])
     if image.dtype == np.uint8:
         return image
-    finite = np.nan_to_num(image.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
-    top = float(np.quantile(finite[:: max(1, finite.shape[0] // 256)], GREY_TOP_QUANTILE))
+    if image.dtype != np.uint16:  # floats: no light below zero, none in a NaN
+        image = np.maximum(np.nan_to_num(image, nan=0.0, posinf=0.0, neginf=0.0), 0)
+    top = float(np.quantile(image[:: max(1, image.shape[0] // 128)], GREY_TOP_QUANTILE))
     if top <= 0:
         log.warning("%s: image has no light (every grey level 0 or below); pair skipped", path)
         return None
-    return np.clip(finite * np.float32(255.0 / top) + np.float32(0.5), 0, 255).astype(np.uint8)
+    return cv2.convertScaleAbs(image, alpha=255.0 / top)  # rounded, saturated at 255
 
 
 #: OpenCV's demosaicing to luminance for each colour filter (OpenCV >= 4.5 names them as cameras do).
