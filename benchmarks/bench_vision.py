@@ -64,7 +64,7 @@ def render(
 ) -> dict[str, float]:
     """Simulate and render a dive (when absent); the rendering speed."""
     from auvnav.executor import make_executor
-    from auvnav.sim.camera import Lighting, render_dive_images, water_type
+    from auvnav.sim.camera import render_dive_images
 
     if not (dive / "truth").is_dir():
         extra = [] if seconds is None else ["--duration-s", str(seconds)]
@@ -74,8 +74,7 @@ def render(
         return {}
     started = time.perf_counter()
     with make_executor() as executor:
-        lighting = Lighting(water=water_type(water), raw=raw)  # type: ignore[arg-type]
-        images = render_dive_images(dive, scale=scale, lighting=lighting, executor=executor)
+        images = render_dive_images(dive, scale=scale, water=water, raw=raw, executor=executor)  # type: ignore[arg-type]
     elapsed = time.perf_counter() - started
     return {"rendered_pairs": len(images), "render_s": elapsed, "render_pairs_per_s": len(images) / elapsed}
 

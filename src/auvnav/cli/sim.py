@@ -352,7 +352,7 @@ def _render_images(
 ) -> int:
     """Render a simulated dive's stereo images (with a progress bar unless silent); the pair count."""
     from auvnav.executor import make_executor
-    from auvnav.sim.camera import Lighting, render_dive_images, water_type
+    from auvnav.sim.camera import render_dive_images
 
     if not 0 < scale <= 4 or rate_hz <= 0:
         raise typer.BadParameter("--image-scale must be in (0, 4] and --image-rate-hz positive")
@@ -362,7 +362,8 @@ def _render_images(
             scale=scale,
             rate_hz=rate_hz,
             seed=seed,
-            lighting=Lighting(water=water_type(water), raw=raw),  # type: ignore[arg-type]
+            water=water,  # type: ignore[arg-type]
+            raw=raw,
             executor=executor,
             progress=None if progress is None else (lambda done, total: progress("rendering", done, total)),
         )

@@ -190,7 +190,9 @@ _CHANNELS = {
     "bgra8": 4,
     "rgba8": 4,
 }
-_CHANNELS.update({f"bayer_{p}{bits}": 1 for p in BAYER_PATTERNS for bits in (8, 16)})
+#: ROS's Bayer encodings (one channel of 8 or 16 bits) and the colour filter each names.
+_BAYER_ENCODINGS = {f"bayer_{p}{bits}": p for p in BAYER_PATTERNS for bits in (8, 16)}
+_CHANNELS.update(dict.fromkeys(_BAYER_ENCODINGS, 1))
 
 
 def _write_raw(path: Path, msg: Any) -> str | None:
@@ -217,7 +219,7 @@ def _write_raw(path: Path, msg: Any) -> str | None:
     if enc.startswith("rgb"):
         img = img[..., ::-1] if _CHANNELS[enc] == 3 else img[..., [2, 1, 0, 3]]
     cv2.imwrite(str(path), img)
-    return enc[6 : -2 if enc.endswith("16") else -1] if enc.startswith("bayer_") else None
+    return _BAYER_ENCODINGS.get(enc)
 
 
 def _stamp(msg: Any, t_bag_ns: int, source: str) -> float:

@@ -928,6 +928,7 @@ def render_dive_images(
     rig: StereoRig | None = None,
     seed: int = 0,
     water: WaterName = "clear",
+    raw: bool = False,
     lighting: Lighting | None = None,
     executor: Executor | None = None,
     progress: Callable[[int, int], None] | None = None,
@@ -955,6 +956,8 @@ def render_dive_images(
         same seafloor in the same (site) coordinates.
     water : {"clear", "coastal", "turbid"}
         The water (:func:`water_type`), unless ``lighting`` is given.
+    raw : bool
+        Raw 12-bit RGGB mosaics (:attr:`Lighting.raw`), unless ``lighting`` is given.
     lighting : Lighting, optional
         Strobes, water and sensor (default: :class:`Lighting` in ``water``).
     executor : Executor, optional
@@ -972,7 +975,7 @@ def render_dive_images(
     seafloor = seafloor_from_truth(dive_path / "truth" / "truth.yaml")
     rig = scale_camera_rig(rig or default_stereo_rig(), scale)
     times = select_image_times(truth, seafloor, rate_hz=rate_hz)
-    lighting = lighting or Lighting(water=water_type(water))
+    lighting = lighting or Lighting(water=water_type(water), raw=raw)
     texture = SeafloorTexture(seed=int(getattr(seafloor, "seed", seed)))  # the site's
     index = render_images(
         truth,
