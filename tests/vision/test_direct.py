@@ -34,17 +34,27 @@ class Stripes:
 
 
 @pytest.fixture(scope="module")
-def bare(level_floor):
-    """Features of the two poses over featureless sand (the texture's bare patches everywhere)."""
+def bare_images(level_floor):
+    """The grey stereo pairs of the two poses over featureless sand (the texture's bare patches everywhere)."""
     texture = SeafloorTexture(seed=5, bare_fraction=1.0, coral_fraction=0.0, ripple_field_fraction=0.0)
     floor = level_floor(20.0)
 
     def render(T, seed):
-        rect = rectification(RIG)
         left, right = render_stereo_pair(floor, texture, RIG, T, rng=np.random.default_rng(seed))
-        return stereo_features(to_grey(left), to_grey(right), RIG, rect, FeatureSettings())
+        return to_grey(left), to_grey(right)
 
     return render(T_A, 0), render(T_B, 1)
+
+
+def features_of(images, settings: FeatureSettings) -> list:
+    rect = rectification(RIG)
+    return [stereo_features(left, right, RIG, rect, settings) for left, right in images]
+
+
+@pytest.fixture(scope="module")
+def bare(bare_images):
+    """Features of the two poses over featureless sand."""
+    return features_of(bare_images, FeatureSettings())
 
 
 def true_relative() -> np.ndarray:
@@ -79,6 +89,20 @@ def test_featureless_sand_registers_from_its_images_where_its_features_do_not(ba
     # the uncertainty it reports is what the images hold: tight along the floor, loose in tilt
     sigma = np.sqrt(np.diag(reg.cov_xi))
     assert sigma[5] < np.radians(0.5) and sigma[3] > np.radians(1.0)
+
+
+def test_a_large_thumbnail_registers_at_every_pixel(bare_images) -> None:
+    """Thumbnails the size SIFT sees, at stride 1: the refinement samples more pixels than OpenCV's
+    remap takes in one row (as a larger feature scale on a large camera's images does)."""
+    fa, fb = features_of(bare_images, FeatureSettings(thumbnail_scale=1.0))
+    T_true = true_relative()
+    settings = replace(DirectSettings(), stride=1)
+    assert fa.thumbnail_image().size > 2**15
+    prior = T_true @ se3(np.eye(3), np.array([0.01, -0.01, 0.0]))
+    reg = register_direct(prepare(fa, settings), prepare(fb, settings), prior, 0.015, settings)
+    assert reg.accepted, reg.reason
+    translation, rotation, _ = errors(reg.T_a_b, reg.cov_xi, T_true)
+    assert translation < 0.008 and rotation < 0.2
 
 
 def test_a_loose_prior_or_no_thumbnail_is_refused(bare) -> None:

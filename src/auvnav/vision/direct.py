@@ -391,15 +391,21 @@ def _sample(
     h, w = images[0].shape
     inside = (X[..., 2] > 0) & (u >= 1) & (u <= w - 2) & (v >= 1) & (v <= h - 2)
     mu, mv = u.astype(np.float32), v.astype(np.float32)
-    if mu.ndim == 1:
-        mu, mv = mu[None], mv[None]
+    if mu.ndim == 1:  # a list of points, laid out in rows: OpenCV's maps must be under 32,767 a side
+        cols = min(len(mu), REMAP_ROW)
+        pad = -len(mu) % max(cols, 1)
+        mu, mv = (np.pad(m, (0, pad)).reshape(-1, max(cols, 1)) for m in (mu, mv))
     out = [
-        cv2.remap(im, mu, mv, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0).reshape(
-            u.shape
-        )
+        cv2.remap(im, mu, mv, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        .ravel()[: u.size]
+        .reshape(u.shape)
         for im in images
     ]
     return out, inside
+
+
+#: Points per row of the maps :func:`_sample` gives ``cv2.remap`` for a list of points.
+REMAP_ROW = 4096
 
 
 @dataclass(frozen=True)
