@@ -40,6 +40,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from auvnav.vision.camera import remap_rows
+
 FloatArray = NDArray[np.float64]
 
 _TILE_M = 8.0  # points are evaluated in world tiles of this size, so lattice windows stay small
@@ -84,11 +86,7 @@ class _Window:
         if north_m.ndim == 2:
             self.north, self.east = north_m, east_m
         else:
-            cols = max(1, min(n, 4096))
-            rows = -(-n // cols)
-            pad = rows * cols - n
-            self.north = np.pad(north_m, (0, pad), mode="edge").reshape(rows, cols)
-            self.east = np.pad(east_m, (0, pad), mode="edge").reshape(rows, cols)
+            self.north, self.east = remap_rows(north_m, east_m)
         self.lo = (float(north_m.min()), float(east_m.min()))
         self.hi = (float(north_m.max()), float(east_m.max()))
         # float32 offsets from the window's corner: exact to a micrometre over a tile, fast to scale.

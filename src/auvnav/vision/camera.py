@@ -204,6 +204,20 @@ def rectify_images(
     return cv2.remap(left, l1, l2, cv2.INTER_LINEAR), cv2.remap(right, r1, r2, cv2.INTER_LINEAR)
 
 
+#: ``cv2.remap`` takes maps under 32,767 pixels a side: :func:`remap_rows` lays a list of points out in
+#: rows this long.
+REMAP_ROW = 4096
+
+
+def remap_rows(*values: NDArray) -> list[NDArray]:
+    """1-D arrays of equal length (the coordinates of a list of points) as 2-D maps for ``cv2.remap``,
+    in rows of :data:`REMAP_ROW` (the last padded with its last value): the first ``n`` values of a
+    remapped result, raveled, are the points in order."""
+    n = len(values[0])
+    cols = max(1, min(n, REMAP_ROW))
+    return [np.pad(v, (0, -n % cols), mode="edge").reshape(-1, cols) for v in values]
+
+
 def check_image_size(cam: CameraModel, shape: tuple[int, ...], name: str) -> None:
     """Raise a one-line :class:`ConfigError` when an image does not have the calibrated size."""
     h, w = shape[:2]

@@ -59,6 +59,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from auvnav.frames import se3, se3_inverse, skew
+from auvnav.vision.camera import remap_rows
 from auvnav.vision.registration import Registration, expm_so3
 from auvnav.vision.stereo import StereoFeatures
 
@@ -391,10 +392,8 @@ def _sample(
     h, w = images[0].shape
     inside = (X[..., 2] > 0) & (u >= 1) & (u <= w - 2) & (v >= 1) & (v <= h - 2)
     mu, mv = u.astype(np.float32), v.astype(np.float32)
-    if mu.ndim == 1:  # a list of points, laid out in rows: OpenCV's maps must be under 32,767 a side
-        cols = min(len(mu), REMAP_ROW)
-        pad = -len(mu) % max(cols, 1)
-        mu, mv = (np.pad(m, (0, pad)).reshape(-1, max(cols, 1)) for m in (mu, mv))
+    if mu.ndim == 1:
+        mu, mv = remap_rows(mu, mv)
     out = [
         cv2.remap(im, mu, mv, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
         .ravel()[: u.size]
@@ -402,10 +401,6 @@ def _sample(
         for im in images
     ]
     return out, inside
-
-
-#: Points per row of the maps :func:`_sample` gives ``cv2.remap`` for a list of points.
-REMAP_ROW = 4096
 
 
 @dataclass(frozen=True)
