@@ -13,7 +13,7 @@ from auvnav.frames import euler2rot, se3, se3_inverse
 from auvnav.sim.camera import camera_poses, default_stereo_rig, render_stereo_pair, scale_camera_rig, to_grey
 from auvnav.sim.texture import SeafloorTexture
 from auvnav.vision.camera import rectification
-from auvnav.vision.direct import DirectSettings, Pinhole, fit_surface, prepare, register_direct
+from auvnav.vision.direct import DirectSettings, Pinhole, fit_surface, inscribed_box, prepare, register_direct
 from auvnav.vision.features import FeatureSettings
 from auvnav.vision.registration import RegistrationSettings, register
 from auvnav.vision.stereo import stereo_features
@@ -103,6 +103,49 @@ def test_a_large_thumbnail_registers_at_every_pixel(bare_images) -> None:
     assert reg.accepted, reg.reason
     translation, rotation, _ = errors(reg.T_a_b, reg.cov_xi, T_true)
     assert translation < 0.008 and rotation < 0.2
+
+
+def test_a_pair_that_overlaps_by_a_corner_registers(level_floor, bare_images) -> None:
+    """B off A diagonally (42% of the image's width and 23% of its height at 2 m): the views share a
+    corner, a third of B's thumbnail, and no row of it is half inside A's view."""
+    texture = SeafloorTexture(seed=5, bare_fraction=1.0, coral_fraction=0.0, ripple_field_fraction=0.0)
+    cam_a = camera_poses(RIG, T_A)[0]
+    width_m, height_m = (
+        2.0 * n / f for n, f in ((RIG.left.width, RIG.left.K[0, 0]), (RIG.left.height, RIG.left.K[1, 1]))
+    )
+    offset = 0.42 * width_m * cam_a[:3, 0] + 0.23 * height_m * cam_a[:3, 1]
+    T_C = se3(T_A[:3, :3], T_A[:3, 3] + np.array([offset[0], offset[1], 0.0]))
+    left, right = render_stereo_pair(level_floor(20.0), texture, RIG, T_C, rng=np.random.default_rng(2))
+    fa, fc = features_of([bare_images[0], (to_grey(left), to_grey(right))], FeatureSettings())
+    T_true = se3_inverse(cam_a) @ camera_poses(RIG, T_C)[0]
+    prior = T_true @ se3(euler2rot(np.radians(1.0), 0.0, 0.0), np.array([0.015, -0.01, 0.0]))
+    settings = DirectSettings()
+    reg = register_direct(prepare(fa, settings), prepare(fc, settings), prior, 0.015, settings)
+    assert reg.accepted, reg.reason
+    translation, rotation, mahalanobis = errors(reg.T_a_b, reg.cov_xi, T_true)
+    assert translation < 0.008 and rotation < 0.2
+    assert mahalanobis < chi2.ppf(0.999, 6)
+
+
+def test_the_search_template_is_the_largest_rectangle_inside_the_overlap() -> None:
+    box = np.zeros((40, 50), bool)
+    box[5:30, 10:45] = True
+    assert inscribed_box(box) == (5, 30, 10, 45)
+    # a corner: 45% of each row, 60% of each column, which a rule of rows and columns more than half
+    # inside would refuse
+    corner = np.zeros((100, 100), bool)
+    corner[40:, 55:] = True
+    assert inscribed_box(corner) == (40, 100, 55, 100)
+    # a diamond (two views turned 45 degrees): all inside, half the diamond (the most a rectangle holds)
+    diamond = np.zeros((101, 101), np.uint8)
+    cv2.fillConvexPoly(diamond, np.array([[50, 0], [100, 50], [50, 100], [0, 50]], np.int32), 1)
+    r0, r1, c0, c1 = inscribed_box(diamond.astype(bool))
+    assert diamond[r0:r1, c0:c1].all()
+    assert (r1 - r0) * (c1 - c0) > 0.45 * diamond.sum()
+    assert inscribed_box(np.zeros((30, 30), bool)) is None
+    thin = np.zeros((30, 30), bool)
+    thin[:, 10:17] = True  # 7 columns: under 8 pixels a side
+    assert inscribed_box(thin) is None
 
 
 def test_a_loose_prior_or_no_thumbnail_is_refused(bare) -> None:

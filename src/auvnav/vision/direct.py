@@ -19,8 +19,11 @@ Steps (:func:`register_direct`):
 2. **Coarse search** (:func:`coarse_search`): A's image warped into B's view by the prior turned about
    B's optical axis in steps of ``yaw_step_rad`` within ``yaw_range_rad``, correlated with B's
    (normalised cross-correlation, ``cv2.matchTemplate``) at every shift within the prior's window,
-   at half the thumbnail's resolution. A pair whose window would exceed ``max_window_m`` is not
-   searched (far apart in time, its prior is loose and a wide window finds chance look-alikes).
+   at half the thumbnail's resolution, over the largest rectangle of B's image that A sees at the
+   prior (:func:`inscribed_box`: where two tracks cross, or pass side by side, they share a corner
+   of the image, no row or column of which need be half inside the other view). A pair whose
+   window would exceed ``max_window_m`` is not searched (far apart in time, its prior is loose and
+   a wide window finds chance look-alikes).
    The local maxima within ``peak_margin`` of the best are kept, at most ``max_peaks`` of them
    (more: a ripple field's crests and their ridges fill the window, the pair is ambiguous).
 3. **Refinement** (:func:`refine`) from each peak: Gauss-Newton with Huber weights on the photometric
@@ -425,6 +428,26 @@ def _turn(T: FloatArray, yaw: float, shift: tuple[float, float] = (0.0, 0.0)) ->
     )
 
 
+def inscribed_box(mask: NDArray[np.bool_], min_side: int = 8) -> tuple[int, int, int, int] | None:
+    """The largest rectangle ``(r0, r1, c0, c1)`` (rows r0 to r1 - 1, columns c0 to c1 - 1) within the
+    span of ``mask``'s true pixels on each of its rows (all true where each row's are one run, as where
+    two views overlap), or None when none is ``min_side`` pixels a side."""
+    h, w = mask.shape
+    on = mask.any(axis=1)
+    first = np.append(np.where(on, mask.argmax(axis=1), w), w)
+    last = np.append(np.where(on, w - mask[:, ::-1].argmax(axis=1), 0), 0)
+    # [r0, k]: the rectangle of rows r0 to r0 + k (row h: a row of nothing, past the end)
+    rows = np.minimum(np.arange(h)[:, None] + np.arange(h)[None, :], h)
+    left = np.maximum.accumulate(first[rows], axis=1)
+    right = np.minimum.accumulate(last[rows], axis=1)
+    width, height = right - left, np.arange(1, h + 1)[None, :]
+    area = np.where((width >= min_side) & (height >= min_side), width * height, 0)
+    r0, k = np.unravel_index(int(area.argmax()), area.shape)
+    if area[r0, k] == 0:
+        return None
+    return int(r0), int(r0 + k + 1), int(left[r0, k]), int(right[r0, k])
+
+
 def coarse_search(
     A: Prepared, B: Prepared, T_prior: FloatArray, window_m: float, settings: DirectSettings
 ) -> CoarseResult | None:
@@ -445,10 +468,9 @@ def coarse_search(
         (warped,), inside = _sample((A.image_coarse,), A.camera_coarse, X @ T[:3, :3].T + T[:3, 3])
         if box is None:
             core = inside[m : m + h, m : m + w]
-            rows, cols = np.flatnonzero(core.mean(axis=1) > 0.5), np.flatnonzero(core.mean(axis=0) > 0.5)
-            if core.mean() < settings.min_overlap or len(rows) < 8 or len(cols) < 8:
+            box = inscribed_box(core)
+            if core.mean() < settings.min_overlap or box is None:
                 return None
-            box = (rows[0], rows[-1] + 1, cols[0], cols[-1] + 1)
         r0, r1, c0, c1 = box
         corr = cv2.matchTemplate(
             warped[r0 : r1 + 2 * m, c0 : c1 + 2 * m], img_b[r0:r1, c0:c1], cv2.TM_CCOEFF_NORMED
