@@ -49,8 +49,9 @@ for its surface, is not near-planar, overlaps too little, has too loose a prior,
 one-dimensional, correlates poorly, or is too uncertain along the floor.
 
 On the check dive's first 900 s at half scale (``benchmarks/bench_vision.py --seconds 900``), the
-pairs it registers are 1.2-1.4 cm and 0.36-0.40 degrees from the truth (median; the features' are
-2.5-6.5 mm and 0.07-0.18 degrees) and all but one of 351 are right in clear, coastal and turbid water.
+pairs it registers are 1.4-1.5 cm and 0.40-0.44 degrees from the truth (median; the features' are
+2.5-6.1 mm and 0.07-0.17 degrees), and 6 of 819 are wrong, 2 in each of clear, coastal and turbid
+water.
 """
 
 from __future__ import annotations
