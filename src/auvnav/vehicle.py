@@ -176,6 +176,10 @@ class StereoRig:
     def baseline_m(self) -> float:
         return float(np.linalg.norm(self.t_right_left_m))
 
+    def with_bayer(self, left: str | None, right: str | None) -> StereoRig:
+        """The same rig with the cameras' colour filters (:attr:`CameraModel.bayer`) set to these."""
+        return replace(self, left=replace(self.left, bayer=left), right=replace(self.right, bayer=right))
+
 
 @dataclass(frozen=True)
 class Vehicle:
@@ -581,8 +585,7 @@ def _stereo(s: _StereoFile, base: Path) -> StereoRig:
         if not isinstance(files, list) or len(files) != 2:
             raise ConfigError("stereo.calibration_file: a ROS calibration is two files [left, right]")
         left, right, R, t = read_ros_stereo(base / files[0], base / files[1])
-    left, right = replace(left, bayer=s.left_bayer), replace(right, bayer=s.right_bayer)
-    return StereoRig(left, right, R, t, s.mount.to_mount())
+    return StereoRig(left, right, R, t, s.mount.to_mount()).with_bayer(s.left_bayer, s.right_bayer)
 
 
 def vehicle_from_mapping(data: Any, *, base: Path, display: str = "vehicle.yaml") -> Vehicle:

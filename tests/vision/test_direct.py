@@ -19,6 +19,8 @@ from auvnav.vision.registration import RegistrationSettings, register
 from auvnav.vision.stereo import stereo_features
 
 RIG = scale_camera_rig(default_stereo_rig(), 0.25)
+#: Featureless sand everywhere (the texture's bare patches).
+BARE_SAND = SeafloorTexture(seed=5, bare_fraction=1.0, coral_fraction=0.0, ripple_field_fraction=0.0)
 #: Two poses of the vehicle 2 m above a level floor 20 m down, 0.4 m apart and turned by 25 degrees.
 T_A = se3(euler2rot(0.3, 0.01, -0.01), np.array([0.0, 0.0, 18.0]))
 T_B = se3(euler2rot(0.3 + np.radians(25), -0.005, 0.01), np.array([0.35, 0.2, 18.02]))
@@ -36,11 +38,10 @@ class Stripes:
 @pytest.fixture(scope="module")
 def bare_images(level_floor):
     """The grey stereo pairs of the two poses over featureless sand (the texture's bare patches everywhere)."""
-    texture = SeafloorTexture(seed=5, bare_fraction=1.0, coral_fraction=0.0, ripple_field_fraction=0.0)
     floor = level_floor(20.0)
 
     def render(T, seed):
-        left, right = render_stereo_pair(floor, texture, RIG, T, rng=np.random.default_rng(seed))
+        left, right = render_stereo_pair(floor, BARE_SAND, RIG, T, rng=np.random.default_rng(seed))
         return to_grey(left), to_grey(right)
 
     return render(T_A, 0), render(T_B, 1)
@@ -74,20 +75,26 @@ def errors(T_est: np.ndarray, cov: np.ndarray, T_true: np.ndarray) -> tuple[floa
     )
 
 
+def assert_registers(fa, fb, prior: np.ndarray, T_true: np.ndarray, settings: DirectSettings) -> np.ndarray:
+    """The direct registration of a pair (prior lateral 1-sigma 1.5 cm) is accepted, within 8 mm and
+    0.2 degrees of the truth and within its covariance; its covariance."""
+    reg = register_direct(prepare(fa, settings), prepare(fb, settings), prior, 0.015, settings)
+    assert reg.accepted, reg.reason
+    translation, rotation, mahalanobis = errors(reg.T_a_b, reg.cov_xi, T_true)
+    assert translation < 0.008 and rotation < 0.2
+    assert mahalanobis < chi2.ppf(0.999, 6)
+    return reg.cov_xi
+
+
 def test_featureless_sand_registers_from_its_images_where_its_features_do_not(bare) -> None:
     fa, fb = bare
     T_true = true_relative()
     # the prior: 2.5 cm and 1.5 degrees off, its lateral 1-sigma 1.5 cm
     prior = T_true @ se3(euler2rot(np.radians(1.5), 0.0, 0.0), np.array([0.02, -0.015, 0.0]))
     assert not register(fa, fb, RegistrationSettings(), prior=(prior, 0.015)).accepted
-    settings = DirectSettings()
-    reg = register_direct(prepare(fa, settings), prepare(fb, settings), prior, 0.015, settings)
-    assert reg.accepted, reg.reason
-    translation, rotation, mahalanobis = errors(reg.T_a_b, reg.cov_xi, T_true)
-    assert translation < 0.008 and rotation < 0.2
-    assert mahalanobis < chi2.ppf(0.999, 6)
+    cov = assert_registers(fa, fb, prior, T_true, DirectSettings())
     # the uncertainty it reports is what the images hold: tight along the floor, loose in tilt
-    sigma = np.sqrt(np.diag(reg.cov_xi))
+    sigma = np.sqrt(np.diag(cov))
     assert sigma[5] < np.radians(0.5) and sigma[3] > np.radians(1.0)
 
 
@@ -99,32 +106,23 @@ def test_a_large_thumbnail_registers_at_every_pixel(bare_images) -> None:
     settings = replace(DirectSettings(), stride=1)
     assert fa.thumbnail_image().size > 2**15
     prior = T_true @ se3(np.eye(3), np.array([0.01, -0.01, 0.0]))
-    reg = register_direct(prepare(fa, settings), prepare(fb, settings), prior, 0.015, settings)
-    assert reg.accepted, reg.reason
-    translation, rotation, _ = errors(reg.T_a_b, reg.cov_xi, T_true)
-    assert translation < 0.008 and rotation < 0.2
+    assert_registers(fa, fb, prior, T_true, settings)
 
 
 def test_a_pair_that_overlaps_by_a_corner_registers(level_floor, bare_images) -> None:
     """B off A diagonally (42% of the image's width and 23% of its height at 2 m): the views share a
     corner, a third of B's thumbnail, and no row of it is half inside A's view."""
-    texture = SeafloorTexture(seed=5, bare_fraction=1.0, coral_fraction=0.0, ripple_field_fraction=0.0)
     cam_a = camera_poses(RIG, T_A)[0]
     width_m, height_m = (
         2.0 * n / f for n, f in ((RIG.left.width, RIG.left.K[0, 0]), (RIG.left.height, RIG.left.K[1, 1]))
     )
     offset = 0.42 * width_m * cam_a[:3, 0] + 0.23 * height_m * cam_a[:3, 1]
     T_C = se3(T_A[:3, :3], T_A[:3, 3] + np.array([offset[0], offset[1], 0.0]))
-    left, right = render_stereo_pair(level_floor(20.0), texture, RIG, T_C, rng=np.random.default_rng(2))
+    left, right = render_stereo_pair(level_floor(20.0), BARE_SAND, RIG, T_C, rng=np.random.default_rng(2))
     fa, fc = features_of([bare_images[0], (to_grey(left), to_grey(right))], FeatureSettings())
     T_true = se3_inverse(cam_a) @ camera_poses(RIG, T_C)[0]
     prior = T_true @ se3(euler2rot(np.radians(1.0), 0.0, 0.0), np.array([0.015, -0.01, 0.0]))
-    settings = DirectSettings()
-    reg = register_direct(prepare(fa, settings), prepare(fc, settings), prior, 0.015, settings)
-    assert reg.accepted, reg.reason
-    translation, rotation, mahalanobis = errors(reg.T_a_b, reg.cov_xi, T_true)
-    assert translation < 0.008 and rotation < 0.2
-    assert mahalanobis < chi2.ppf(0.999, 6)
+    assert_registers(fa, fc, prior, T_true, DirectSettings())
 
 
 def test_the_search_template_is_the_largest_rectangle_inside_the_overlap() -> None:

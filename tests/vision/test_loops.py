@@ -168,12 +168,7 @@ def test_a_dive_of_raw_mosaics_finds_the_loops_of_its_colour_images(
     vehicle = read_vehicle(copy / "vehicle.yaml")
     rig = vehicle.stereo
     assert rig is not None
-    raw_rig = dataclasses.replace(
-        rig,
-        left=dataclasses.replace(rig.left, bayer="rggb"),
-        right=dataclasses.replace(rig.right, bayer="rggb"),
-    )
-    write_vehicle(dataclasses.replace(vehicle, stereo=raw_rig), copy / "vehicle.yaml")
+    write_vehicle(dataclasses.replace(vehicle, stereo=rig.with_bayer("rggb", "rggb")), copy / "vehicle.yaml")
     assert main(["validate", str(copy)]) == 1
     assert "image has 3 channels but" in capsys.readouterr().err
     assert main(["loops", str(copy), "--workers", "1", "-q"]) == 1

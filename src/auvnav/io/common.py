@@ -439,16 +439,15 @@ def _with_image_filters(vehicle: Vehicle, rule: str, filters: dict[str, str], no
         keys = ", ".join(f"{side}_bayer: {pattern}" for side, pattern in sorted(filters.items()))
         notes.append(f"the images are raw mosaics: give the stereo calibration in vehicle.yaml with {keys}")
         return vehicle
-    cameras = {"left": stereo.left, "right": stereo.right}
+    bayer = {"left": stereo.left.bayer, "right": stereo.right.bayer}
     for side, pattern in filters.items():
-        if cameras[side].bayer not in (None, pattern):
+        if bayer[side] not in (None, pattern):
             raise ConfigError(
-                f"{rule}: stereo.{side}_bayer is {cameras[side].bayer} but the {side} images are raw "
-                f"{pattern} mosaics"
+                f"{rule}: stereo.{side}_bayer is {bayer[side]} but the {side} images are raw {pattern} mosaics"
             )
-        cameras[side] = dataclasses.replace(cameras[side], bayer=pattern)
+        bayer[side] = pattern
         notes.append(f"the {side} images are raw {pattern} mosaics (vehicle.yaml: stereo.{side}_bayer)")
-    return dataclasses.replace(vehicle, stereo=dataclasses.replace(stereo, **cameras))
+    return dataclasses.replace(vehicle, stereo=stereo.with_bayer(bayer["left"], bayer["right"]))
 
 
 def assemble(

@@ -1000,10 +1000,6 @@ def render_dive_images(
     atomic_write(dive_path / "truth" / "imaging.yaml", lambda p: p.write_text(text, encoding="utf-8"))
     vehicle_file = dive_path / (vehicle_file_name(dive_path) or "vehicle.yaml")
     if lighting.raw:  # the vehicle file names the cameras' colour filter
-        rig = dataclasses.replace(
-            rig,
-            left=dataclasses.replace(rig.left, bayer="rggb"),
-            right=dataclasses.replace(rig.right, bayer="rggb"),
-        )
+        rig = rig.with_bayer("rggb", "rggb")
     write_vehicle(dataclasses.replace(read_vehicle(vehicle_file), stereo=rig), vehicle_file)
     return index
