@@ -214,6 +214,50 @@ def test_guided_matching_resolves_repetitive_texture_inside_the_prior_window() -
     assert not register(a, b, RegistrationSettings(), prior=(wrong, 0.03)).accepted
 
 
+@pytest.mark.parametrize("radius_m", [0.05, 0.3, 0.7, 5.0])
+def test_guided_matching_in_bands_finds_what_comparing_every_pair_finds(radius_m: float) -> None:
+    """The guided search compares A's points with B's in bands along x; it must give exactly the
+    matches of the definition: every pair of points within the window compared, mutual best, ratio
+    test against the second best capped by the typical distance of a sample of the candidates. Points
+    on a 1 cm grid (ties in x, distances exactly at the radius) and repeated descriptors (ties in
+    distance) probe the edges."""
+    from auvnav.vision.features import mutual_matches, squared_distances
+    from auvnav.vision.registration import guided_matches
+
+    rng = np.random.default_rng(11)
+    n = 1500
+    p_b = np.column_stack([rng.uniform(-1, 1, n), rng.uniform(-0.75, 0.75, n), rng.uniform(2.4, 2.6, n)])
+    p_b[:, :2] = np.round(p_b[:, :2], 2)
+    T = se3(euler2rot(0.0, 0.0, 0.0), np.array([0.5, 0.2, 0.0]))
+    p_a = p_b + T[:3, 3] + np.column_stack([np.round(rng.normal(0, 0.03, (n, 2)), 2), np.zeros(n)])
+    patterns = rng.integers(0, 16, (n // 3, 128))
+    desc = patterns[rng.integers(0, n // 3, n)]
+    noisy = lambda: np.clip(desc + rng.integers(-2, 3, desc.shape), 0, 15).astype(np.uint8)  # noqa: E731
+    cov = np.broadcast_to(np.eye(3) * 1e-6, (n, 3, 3)).copy()
+    a = StereoFeatures(np.zeros((n, 4)), p_a, cov, noisy())
+    b = StereoFeatures(np.zeros((n, 4)), p_b, cov.copy(), noisy())
+
+    # the definition, every pair at once: the points of each side that may have a candidate ...
+    q = p_b[:, :2] + T[:2, 3]
+    pa = p_a[:, :2]
+    lo, hi = q.min(axis=0) - radius_m, q.max(axis=0) + radius_m
+    sa = np.flatnonzero(((pa >= lo) & (pa <= hi)).all(axis=1))
+    lo, hi = pa[sa].min(axis=0) - radius_m, pa[sa].max(axis=0) + radius_m
+    sb = np.flatnonzero(((q >= lo) & (q <= hi)).all(axis=1))
+    # ... every descriptor distance within the window, the typical one from every 7th x 3rd
+    d = pa[sa].astype(np.float32)[:, None, :] - q[sb].astype(np.float32)[None, :, :]
+    outside = (d**2).sum(axis=2) > np.float32(radius_m**2)
+    d2 = squared_distances(a.descriptors[sa], b.descriptors[sb])
+    typical = float(np.median(d2[::7, ::3][~outside[::7, ::3]]))
+    d2[outside] = np.inf
+    ia, ib = mutual_matches(d2, ratio=0.85, second_cap=typical)
+
+    ga, gb = guided_matches(a, b, T, radius_m, 0.85)
+    assert len(ia) > 20
+    np.testing.assert_array_equal(ga, sa[ia])
+    np.testing.assert_array_equal(gb, sb[ib])
+
+
 def test_a_registration_tilted_away_from_the_prior_is_rejected() -> None:
     """The prior's roll and pitch come from the attitude sensors: a fit tilted 3 degrees from them is
     a wrong one (matches slid along ripple crests), whatever its inliers say."""

@@ -316,16 +316,47 @@ def compand_descriptors(descriptors: NDArray[np.uint8]) -> NDArray[np.uint8]:
     return np.minimum(np.rint(15.0 * np.sqrt(d / SIFT_COMPONENT_MAX)), 15.0).astype(np.uint8)
 
 
-def squared_distances(desc_a: NDArray[np.uint8], desc_b: NDArray[np.uint8]) -> NDArray[np.float32]:
+def squared_distances(
+    desc_a: NDArray,
+    desc_b: NDArray,
+    norms_a: NDArray[np.float32] | None = None,
+    norms_b: NDArray[np.float32] | None = None,
+) -> NDArray[np.float32]:
     """Every squared distance between two sets of descriptors, shape (Na, Nb), from one float32 matrix
-    product (``|a|^2 + |b|^2 - 2 a.b``)."""
-    a = desc_a.astype(np.float32)
-    b = desc_b.astype(np.float32)
+    product (``|a|^2 + |b|^2 - 2 a.b``); ``norms_a``, ``norms_b``: the squared norms, when known."""
+    a = desc_a.astype(np.float32, copy=False)
+    b = desc_b.astype(np.float32, copy=False)
     d2 = a @ b.T
     d2 *= -2.0
-    d2 += (a * a).sum(1)[:, None]
-    d2 += (b * b).sum(1)[None, :]
+    d2 += ((a * a).sum(1) if norms_a is None else norms_a)[:, None]
+    d2 += ((b * b).sum(1) if norms_b is None else norms_b)[None, :]
     return d2
+
+
+def best_two(d2: NDArray[np.float32]) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.intp]]:
+    """Each row's smallest and second smallest value of a squared-distance matrix, and the column of
+    the smallest. ``d2`` is used as scratch and restored."""
+    rows = np.arange(len(d2))
+    j = np.argmin(d2, axis=1)
+    best = d2[rows, j].copy()
+    d2[rows, j] = np.inf
+    second = d2.min(axis=1)
+    d2[rows, j] = best
+    return best, second, j
+
+
+def mutual_ratio_test(
+    best: NDArray[np.float32],
+    second: NDArray[np.float32],
+    col_best: NDArray[np.float32],
+    *,
+    ratio: float,
+    second_cap: float = np.inf,
+) -> NDArray[np.bool_]:
+    """Which rows' best matches are mutual (no smaller distance in their column: ``col_best``, the
+    column's smallest) and pass Lowe's ratio test against the second best, capped at ``second_cap``."""
+    second = np.minimum(second, second_cap)
+    return np.isfinite(best) & (best <= col_best) & (best < ratio * ratio * second)
 
 
 def mutual_matches(
@@ -333,15 +364,11 @@ def mutual_matches(
 ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
     """Mutual nearest neighbours of a squared-distance matrix (Na, Nb; ``inf``: not a candidate) whose
     best distance passes Lowe's ratio test against the second best of its row, that second best capped
-    at ``second_cap`` (squared). ``d2`` is used as scratch and restored."""
-    rows = np.arange(len(d2))
-    ja = np.argmin(d2, axis=1)
-    best = d2[rows, ja].copy()
-    d2[rows, ja] = np.inf
-    second = np.minimum(d2.min(axis=1), second_cap)
-    d2[rows, ja] = best
-    ok = np.isfinite(best) & (best <= d2.min(axis=0)[ja]) & (best < ratio * ratio * second)
-    return rows[ok], ja[ok]
+    at ``second_cap`` (squared) (:func:`best_two`, :func:`mutual_ratio_test`). ``d2`` is used as
+    scratch and restored."""
+    best, second, ja = best_two(d2)
+    ok = mutual_ratio_test(best, second, d2.min(axis=0)[ja], ratio=ratio, second_cap=second_cap)
+    return np.flatnonzero(ok), ja[ok]
 
 
 def match_descriptors(

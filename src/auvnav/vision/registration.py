@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from auvnav.frames import se3, skew
-from auvnav.vision.features import Vocabulary, match_by_word, mutual_matches, squared_distances
+from auvnav.vision.features import Vocabulary, best_two, match_by_word, mutual_ratio_test, squared_distances
 from auvnav.vision.stereo import StereoFeatures
 
 FloatArray = NDArray[np.float64]
@@ -388,18 +388,51 @@ def guided_matches(
     if len(sb) < 2:
         return empty, empty
     pa32, q32 = pa[sa].astype(np.float32), q[sb].astype(np.float32)
-    dx = pa32[:, None, 0] - q32[None, :, 0]
-    dy = pa32[:, None, 1] - q32[None, :, 1]
-    dx *= dx
-    dy *= dy
-    dx += dy
-    outside = dx > np.float32(radius_m * radius_m)
-    d2 = squared_distances(a.descriptors[sa], b.descriptors[sb])
-    sample = d2[::7, ::3][~outside[::7, ::3]]  # the typical distance, from a sample of the candidates
+    da, db = a.descriptors[sa].astype(np.float32), b.descriptors[sb].astype(np.float32)
+    na, nb = (da * da).sum(axis=1), (db * db).sum(axis=1)
+    r2 = np.float32(radius_m * radius_m)
+
+    def candidates(rows: NDArray[np.intp], cols: NDArray[np.intp]) -> NDArray[np.float32]:
+        """Descriptor distances of A's points ``rows`` against B's ``cols``; inf outside the window."""
+        d2 = squared_distances(da[rows], db[cols], na[rows], nb[cols])
+        dx = pa32[rows, None, 0] - q32[None, cols, 0]
+        dy = pa32[rows, None, 1] - q32[None, cols, 1]
+        dx *= dx
+        dy *= dy
+        dx += dy
+        np.putmask(d2, dx > r2, np.float32(np.inf))
+        return d2
+
+    # the typical distance, from a sample of the candidates
+    sample = candidates(np.arange(0, len(sa), 7), np.arange(0, len(sb), 3))
+    sample = sample[np.isfinite(sample)]
     typical = float(np.median(sample)) if len(sample) else 0.0
-    np.putmask(d2, outside, np.float32(np.inf))
-    ia, ib = mutual_matches(d2, ratio=ratio, second_cap=typical)
-    return sa[ia], sb[ib]
+    # A's points in bands along x, each against the B points within the radius of the band in x: the
+    # window keeps a fraction of the pairs, and the distances outside it are never computed
+    order_a = np.argsort(pa32[:, 0], kind="stable")
+    order_b = np.argsort(q32[:, 0], kind="stable")
+    qx = q32[order_b, 0]
+    best, second = np.full(len(sa), np.inf, np.float32), np.full(len(sa), np.inf, np.float32)
+    match = np.zeros(len(sa), dtype=np.intp)
+    col_best = np.full(len(sb), np.inf, np.float32)
+    for start in range(0, len(sa), GUIDED_BAND_ROWS):
+        rows = order_a[start : start + GUIDED_BAND_ROWS]
+        reach = radius_m + 1e-6  # the window's own test (float32) decides at its edge
+        c0 = int(np.searchsorted(qx, pa32[rows[0], 0] - reach, side="left"))
+        c1 = int(np.searchsorted(qx, pa32[rows[-1], 0] + reach, side="right"))
+        if c1 <= c0:
+            continue
+        cols = order_b[c0:c1]
+        d2 = candidates(rows, cols)
+        col_best[cols] = np.minimum(col_best[cols], d2.min(axis=0))
+        best[rows], second[rows], j = best_two(d2)
+        match[rows] = cols[j]
+    ok = mutual_ratio_test(best, second, col_best[match], ratio=ratio, second_cap=typical)
+    return sa[ok], sb[match[ok]]
+
+
+#: :func:`guided_matches` compares A's points with B's in bands of this many (sorted along x).
+GUIDED_BAND_ROWS = 128
 
 
 def register(
