@@ -376,7 +376,7 @@ def guided_matches(
     if len(a) < 2 or len(b) < 2:
         return empty, empty
     # Keep only the points of each side that have a candidate on the other (most of a partial overlap
-    # has none), then every descriptor distance (one matrix product), masked by the window.
+    # has none), then the descriptor distances of the pairs within the window.
     q = b.p_cam_m @ T_a_b[:2, :3].T + T_a_b[:2, 3]
     pa = a.p_cam_m[:, :2]
     lo, hi = q.min(axis=0) - radius_m, q.max(axis=0) + radius_m
@@ -415,9 +415,9 @@ def guided_matches(
     best, second = np.full(len(sa), np.inf, np.float32), np.full(len(sa), np.inf, np.float32)
     match = np.zeros(len(sa), dtype=np.intp)
     col_best = np.full(len(sb), np.inf, np.float32)
+    reach = radius_m + 1e-6  # the window's own test (float32) decides at its edge
     for start in range(0, len(sa), GUIDED_BAND_ROWS):
         rows = order_a[start : start + GUIDED_BAND_ROWS]
-        reach = radius_m + 1e-6  # the window's own test (float32) decides at its edge
         c0 = int(np.searchsorted(qx, pa32[rows[0], 0] - reach, side="left"))
         c1 = int(np.searchsorted(qx, pa32[rows[-1], 0] + reach, side="right"))
         if c1 <= c0:
