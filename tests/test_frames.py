@@ -96,6 +96,18 @@ def test_se3_apply_matches_matrix(T: np.ndarray, p: np.ndarray) -> None:
     np.testing.assert_allclose(F.se3_apply(T, p), (T @ np.append(p, 1.0))[:3], atol=1e-9)
 
 
+@given(transforms(), vec, vec)
+def test_se3_apply_to_a_grid_of_points_matches_each_point(
+    T: np.ndarray, p: np.ndarray, q: np.ndarray
+) -> None:
+    """One transform over a (2, 3, 3) stack of points (OpenCV's path) is each point's transform."""
+    grid = np.stack([np.stack([p, q, p - q]), np.stack([q, p + q, 2 * p])])
+    out = F.se3_apply(T, grid)
+    assert out.shape == grid.shape
+    for k in np.ndindex(grid.shape[:2]):
+        np.testing.assert_allclose(out[k], (T @ np.append(grid[k], 1.0))[:3], rtol=1e-9, atol=1e-6)
+
+
 @settings(max_examples=50)
 @given(
     st.floats(-80, 80),

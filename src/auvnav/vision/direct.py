@@ -62,7 +62,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from auvnav.frames import se3, se3_inverse, skew
+from auvnav.frames import se3, se3_apply, se3_inverse, skew
 from auvnav.vision.camera import remap_rows
 from auvnav.vision.registration import Registration, expm_so3
 from auvnav.vision.stereo import StereoFeatures
@@ -388,13 +388,6 @@ def _points_of_pixels(surface: Surface, camera: Pinhole, u: FloatArray, v: Float
     return np.stack([x * z, y * z, z], axis=-1)
 
 
-def _moved(X: FloatArray, R: FloatArray, t: FloatArray) -> FloatArray:
-    """Points X (..., 3) moved by the rigid transform ``(R, t)``: ``R X + t`` (``cv2.transform``: 40
-    times numpy's matrix product of an (N, 3) array on 20,000 points)."""
-    M = np.hstack([R, np.reshape(t, (3, 1))])
-    return cv2.transform(np.ascontiguousarray(X, dtype=float).reshape(-1, 1, 3), M).reshape(X.shape)
-
-
 def _sample(image: NDArray[np.float32], camera: Pinhole, X: FloatArray) -> tuple[NDArray, NDArray]:
     """An image (H, W) or (H, W, C) sampled (bilinear) where points X (..., 3) project (shape ``X``'s
     without its last axis, then C), and which points land inside (1 px border)."""
@@ -468,7 +461,7 @@ def coarse_search(
     box = None
     for dyaw in yaws:
         T = _turn(T_prior, dyaw)
-        warped, inside = _sample(A.image_coarse, A.camera_coarse, _moved(X, T[:3, :3], T[:3, 3]))
+        warped, inside = _sample(A.image_coarse, A.camera_coarse, se3_apply(T, X))
         if box is None:
             core = inside[m : m + h, m : m + w]
             box = inscribed_box(core)
@@ -553,7 +546,7 @@ def overlap_points(
     P: FloatArray, T_other_this: FloatArray, other: Pinhole, shape: tuple[int, int]
 ) -> NDArray[np.bool_]:
     """Which points of one pair (its rectified frame) the other pair's image sees."""
-    X = _moved(P, T_other_this[:3, :3], T_other_this[:3, 3])
+    X = se3_apply(T_other_this, P)
     u, v = other.project(X)
     return (X[:, 2] > 0) & (u >= 0) & (u <= shape[1] - 1) & (v >= 0) & (v <= shape[0] - 1)
 
@@ -578,7 +571,7 @@ def refine(A: Prepared, B: Prepared, T0: FloatArray, settings: DirectSettings) -
     Ib = cv2.remap(B.image_grad, u.astype(np.float32), v.astype(np.float32), cv2.INTER_LINEAR)[..., 0].ravel()
     cam = A.camera
     R, t = T0[:3, :3].copy(), T0[:3, 3].copy()
-    Xa = _moved(Xb, R, t)
+    Xa = se3_apply(se3(R, t), Xb)
     looks, inside = _sample(A.image_grad, cam, Xa)
     seen = np.flatnonzero(inside)
     if len(seen) < 200:
@@ -617,7 +610,7 @@ def refine(A: Prepared, B: Prepared, T0: FloatArray, settings: DirectSettings) -
         cost = _robust_cost(r / sigma_r, settings.huber_k)
         for _ in range(4):
             R_new, t_new = _perturb(R, t, step, pivot)
-            Xa = _moved(Xb, R_new, t_new)
+            Xa = se3_apply(se3(R_new, t_new), Xb)
             looks, inside = _sample(A.image_grad, cam, Xa)
             seen = np.flatnonzero(inside)
             trial = (_standardised(looks[seen, 0]) - _standardised(Ib.take(seen))) / sigma_r
