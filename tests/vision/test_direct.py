@@ -13,7 +13,17 @@ from auvnav.frames import euler2rot, se3, se3_inverse
 from auvnav.sim.camera import camera_poses, default_stereo_rig, render_stereo_pair, scale_camera_rig, to_grey
 from auvnav.sim.texture import SeafloorTexture
 from auvnav.vision.camera import rectification
-from auvnav.vision.direct import DirectSettings, Pinhole, fit_surface, inscribed_box, prepare, register_direct
+from auvnav.vision.direct import (
+    DirectSettings,
+    Pinhole,
+    fit_surface,
+    inscribed_box,
+    pair_geometry,
+    plan_search,
+    prepare,
+    register_direct,
+    rejected,
+)
 from auvnav.vision.features import FeatureSettings
 from auvnav.vision.registration import RegistrationSettings, register
 from auvnav.vision.stereo import stereo_features
@@ -75,10 +85,18 @@ def errors(T_est: np.ndarray, cov: np.ndarray, T_true: np.ndarray) -> tuple[floa
     )
 
 
+def direct(fa, fb, prior: np.ndarray, sigma_m: float, settings: DirectSettings):
+    """The direct registration as the loop stage runs it: the search planned from the pairs'
+    geometry, then the images compared."""
+    A, B = prepare(fa, settings), prepare(fb, settings)
+    search = plan_search(A.geometry, B.geometry, prior, sigma_m, settings)
+    return rejected(search) if isinstance(search, str) else register_direct(A, B, search, settings)
+
+
 def assert_registers(fa, fb, prior: np.ndarray, T_true: np.ndarray, settings: DirectSettings) -> np.ndarray:
     """The direct registration of a pair (prior lateral 1-sigma 1.5 cm) is accepted, within 8 mm and
     0.2 degrees of the truth and within its covariance; its covariance."""
-    reg = register_direct(prepare(fa, settings), prepare(fb, settings), prior, 0.015, settings)
+    reg = direct(fa, fb, prior, 0.015, settings)
     assert reg.accepted, reg.reason
     translation, rotation, mahalanobis = errors(reg.T_a_b, reg.cov_xi, T_true)
     assert translation < 0.008 and rotation < 0.2
@@ -146,15 +164,24 @@ def test_the_search_template_is_the_largest_rectangle_inside_the_overlap() -> No
     assert inscribed_box(thin) is None
 
 
-def test_a_loose_prior_or_no_thumbnail_is_refused(bare) -> None:
+def test_a_loose_prior_no_thumbnail_or_no_overlap_is_refused_from_the_geometry(bare) -> None:
     fa, fb = bare
     settings = DirectSettings()
-    A, B = prepare(fa, settings), prepare(fb, settings)
-    far = register_direct(A, B, true_relative(), 0.2, settings)
-    assert not far.accepted and far.reason.startswith("prior too uncertain")
+    A, B = pair_geometry(fa, settings), pair_geometry(fb, settings)
+    # the thumbnail's size from its header is the decoded image's
+    assert A.shape == fa.thumbnail_image().shape
+    far = plan_search(A, B, true_relative(), 0.2, settings)
+    assert far.startswith("prior too uncertain")
+    assert pair_geometry(replace(fa, thumbnail=None), settings) is None
     assert prepare(replace(fa, thumbnail=None), settings) is None
-    none = register_direct(None, B, true_relative(), 0.01, settings)
-    assert not none.accepted and none.reason == "no thumbnail"
+    assert plan_search(None, B, true_relative(), 0.01, settings) == "no thumbnail"
+    # B a whole footprint (2.5 m at 20 m) off to the side: nothing to compare
+    away = true_relative() @ se3(np.eye(3), np.array([2.5, 0.0, 0.0]))
+    assert plan_search(A, B, away, 0.01, settings) == "overlap too small"
+    # at the prior, most of B is in A's view: a search, over the largest rectangle A sees
+    search = plan_search(A, B, true_relative(), 0.01, settings)
+    r0, r1, c0, c1 = search.box
+    assert (r1 - r0) * (c1 - c0) > 0.25 * np.prod(B.coarse_shape)
 
 
 def test_stripes_are_never_a_position(level_floor) -> None:
@@ -182,9 +209,9 @@ def test_stripes_are_never_a_position(level_floor) -> None:
         )
 
     settings = DirectSettings()
-    A, B = prepare(render(T_A, 0), settings), prepare(render(T_B, 1), settings)
+    fa, fb = render(T_A, 0), render(T_B, 1)
     for sigma in (0.01, 0.04):
-        reg = register_direct(A, B, true_relative(), sigma, settings)
+        reg = direct(fa, fb, true_relative(), sigma, settings)
         assert not reg.accepted
         refusals = ("ambiguous", "one-dimensional", "no refinement stayed", "best correlation at the edge")
         assert reg.reason.startswith(refusals), reg.reason

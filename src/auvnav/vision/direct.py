@@ -322,18 +322,17 @@ class Pinhole:
 
 
 @dataclass(frozen=True)
-class Prepared:
-    """A pair's data for the direct registration, computed once per pair and reused.
+class Geometry:
+    """What the direct registration knows of a pair before it looks at its images: enough to refuse
+    most candidates (no surface, relief, a loose prior, too little overlap: :func:`plan_search`)
+    without preparing an image.
 
     Parameters
     ----------
-    image_grad : ndarray, float32, shape (H, W, 3)
-        Band-passed thumbnail, scaled to unit standard deviation, and its horizontal and vertical
-        derivatives, as the channels of one image (the refinement samples all three at once).
-    image_coarse : ndarray, float32
-        The band-passed thumbnail at half resolution.
-    camera, camera_coarse : Pinhole
-        Rectified intrinsics of ``image_grad`` and ``image_coarse``.
+    camera : Pinhole
+        Rectified intrinsics of the thumbnail.
+    shape : (int, int)
+        The thumbnail's rows and columns.
     surface : Surface or None
     p_rect_m, sigma_inverse_m : ndarray
         The stereo points in the rectified frame (N, 3) and each one's inverse-depth 1-sigma (N,).
@@ -341,14 +340,42 @@ class Prepared:
         The rotation of the left camera's frame into the rectified one.
     """
 
-    image_grad: NDArray[np.float32]
-    image_coarse: NDArray[np.float32]
     camera: Pinhole
-    camera_coarse: Pinhole
+    shape: tuple[int, int]
     surface: Surface | None
     p_rect_m: FloatArray
     sigma_inverse_m: FloatArray
     R1: FloatArray
+
+    @property
+    def coarse_shape(self) -> tuple[int, int]:
+        """Rows and columns of the half-resolution image of the coarse search."""
+        return self.shape[0] // 2, self.shape[1] // 2
+
+    @property
+    def camera_coarse(self) -> Pinhole:
+        """Rectified intrinsics of the half-resolution image."""
+        (h, w), (hc, wc) = self.shape, self.coarse_shape
+        return self.camera.scaled(wc / w, hc / h)
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A pair's geometry and images for the direct registration, computed once per pair and reused.
+
+    Parameters
+    ----------
+    geometry : Geometry
+    image_grad : ndarray, float32, shape (H, W, 3)
+        Band-passed thumbnail, scaled to unit standard deviation, and its horizontal and vertical
+        derivatives, as the channels of one image (the refinement samples all three at once).
+    image_coarse : ndarray, float32
+        The band-passed thumbnail at half resolution.
+    """
+
+    geometry: Geometry
+    image_grad: NDArray[np.float32]
+    image_coarse: NDArray[np.float32]
 
 
 def _bandpass(image: NDArray[np.float32], sigmas: tuple[float, float]) -> NDArray[np.float32]:
@@ -356,29 +383,41 @@ def _bandpass(image: NDArray[np.float32], sigmas: tuple[float, float]) -> NDArra
     return out / np.float32(max(float(out.std()), 1e-6))
 
 
-def prepare(features: StereoFeatures, settings: DirectSettings) -> Prepared | None:
-    """A pair's :class:`Prepared` data, or None when it has no thumbnail."""
-    thumb = features.thumbnail_image()
+def pair_geometry(features: StereoFeatures, settings: DirectSettings) -> Geometry | None:
+    """A pair's :class:`Geometry` (the thumbnail's size from its header: the image is not decoded), or
+    None when it has no thumbnail."""
+    shape = features.thumbnail_shape()
     geometry = features.geometry
-    if thumb is None or geometry is None:
+    if shape is None or geometry is None:
         return None
-    h, w = thumb.shape
     camera = Pinhole(geometry.f_px, geometry.f_px, geometry.cx_px, geometry.cy_px).scaled(
         *features.thumbnail_scale
     )
-    image = _bandpass(thumb.astype(np.float32), settings.band_sigmas_px)
-    coarse = cv2.resize(thumb, (w // 2, h // 2), interpolation=cv2.INTER_AREA).astype(np.float32)
-    camera_coarse = camera.scaled((w // 2) / w, (h // 2) / h)
-    coarse = _bandpass(coarse, (settings.band_sigmas_px[0], settings.band_sigmas_px[1] / 2))
-    grad_u = cv2.Sobel(image, cv2.CV_32F, 1, 0, ksize=1, scale=0.5)
-    grad_v = cv2.Sobel(image, cv2.CV_32F, 0, 1, ksize=1, scale=0.5)
-    image_grad = cv2.merge((image, grad_u, grad_v))
     R1 = np.asarray(geometry.R1, dtype=float)
     p = features.p_cam_m @ R1.T
     cov_z = np.einsum("i,nij,j->n", R1[2], features.cov_cam_m2, R1[2])
     sigma_inv = np.sqrt(np.maximum(cov_z, 0.0)) / p[:, 2] ** 2
-    surface = fit_surface(p, sigma_inv, camera, (h, w), settings)
-    return Prepared(image_grad, coarse, camera, camera_coarse, surface, p, sigma_inv, R1)
+    surface = fit_surface(p, sigma_inv, camera, shape, settings)
+    return Geometry(camera, shape, surface, p, sigma_inv, R1)
+
+
+def prepare(
+    features: StereoFeatures, settings: DirectSettings, geometry: Geometry | None = None
+) -> Prepared | None:
+    """A pair's :class:`Prepared` data (``geometry``: its :func:`pair_geometry`, when known), or None
+    when it has no thumbnail or the thumbnail does not decode to the size its header gives."""
+    if geometry is None:
+        geometry = pair_geometry(features, settings)
+    thumb = features.thumbnail_image()
+    if geometry is None or thumb is None or thumb.shape != geometry.shape:
+        return None
+    image = _bandpass(thumb.astype(np.float32), settings.band_sigmas_px)
+    hc, wc = geometry.coarse_shape
+    coarse = cv2.resize(thumb, (wc, hc), interpolation=cv2.INTER_AREA).astype(np.float32)
+    coarse = _bandpass(coarse, (settings.band_sigmas_px[0], settings.band_sigmas_px[1] / 2))
+    grad_u = cv2.Sobel(image, cv2.CV_32F, 1, 0, ksize=1, scale=0.5)
+    grad_v = cv2.Sobel(image, cv2.CV_32F, 0, 1, ksize=1, scale=0.5)
+    return Prepared(geometry, cv2.merge((image, grad_u, grad_v)), coarse)
 
 
 def _points_of_pixels(surface: Surface, camera: Pinhole, u: FloatArray, v: FloatArray) -> FloatArray:
@@ -388,12 +427,20 @@ def _points_of_pixels(surface: Surface, camera: Pinhole, u: FloatArray, v: Float
     return np.stack([x * z, y * z, z], axis=-1)
 
 
+def _projected(
+    camera: Pinhole, shape: tuple[int, int], X: FloatArray
+) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+    """Where points X (..., 3) project in an image of ``shape`` (rows, columns), and which land inside
+    it (1 px border)."""
+    u, v = camera.project(X)
+    h, w = shape
+    return u, v, (X[..., 2] > 0) & (u >= 1) & (u <= w - 2) & (v >= 1) & (v <= h - 2)
+
+
 def _sample(image: NDArray[np.float32], camera: Pinhole, X: FloatArray) -> tuple[NDArray, NDArray]:
     """An image (H, W) or (H, W, C) sampled (bilinear) where points X (..., 3) project (shape ``X``'s
     without its last axis, then C), and which points land inside (1 px border)."""
-    u, v = camera.project(X)
-    h, w = image.shape[:2]
-    inside = (X[..., 2] > 0) & (u >= 1) & (u <= w - 2) & (v >= 1) & (v <= h - 2)
+    u, v, inside = _projected(camera, image.shape[:2], X)
     mu, mv = u.astype(np.float32), v.astype(np.float32)
     if mu.ndim == 1:
         mu, mv = remap_rows(mu, mv)
@@ -444,30 +491,76 @@ def inscribed_box(mask: NDArray[np.bool_], min_side: int = 8) -> tuple[int, int,
     return int(r0), int(r0 + k + 1), int(left[r0, k]), int(right[r0, k])
 
 
-def coarse_search(
-    A: Prepared, B: Prepared, T_prior: FloatArray, window_m: float, settings: DirectSettings
-) -> CoarseResult | None:
-    """Correlation over yaw and shift at half resolution (module docstring, step 2); None when the
-    pairs overlap too little at the prior."""
-    assert B.surface is not None
-    img_b = B.image_coarse
-    h, w = img_b.shape
+@dataclass(frozen=True)
+class Search:
+    """Where the coarse search looks (:func:`plan_search`).
+
+    Parameters
+    ----------
+    T_rect : ndarray, shape (4, 4)
+        The prior ``T_a_b`` between the pairs' rectified frames.
+    window_m : float
+        The radius of the translation window.
+    margin : int
+        The window's radius in B's coarse pixels.
+    points : ndarray, shape (h + 2 margin, w + 2 margin, 3)
+        B's coarse pixels, and a margin about them, lifted to 3-D by its surface (B's rectified frame).
+    box : (int, int, int, int)
+        The largest rectangle of B's coarse image (rows r0 to r1 - 1, columns c0 to c1 - 1) that A
+        sees at the prior turned by the search's first yaw (:func:`inscribed_box`).
+    """
+
+    T_rect: FloatArray
+    window_m: float
+    margin: int
+    points: FloatArray
+    box: tuple[int, int, int, int]
+
+
+def plan_search(
+    A: Geometry | None, B: Geometry | None, T_prior: FloatArray, sigma_m: float, settings: DirectSettings
+) -> Search | str:
+    """The coarse search for pair B in pair A (``T_prior``: the prior ``T_a_b``, unrectified camera
+    frames, as :func:`auvnav.vision.registration.register`; ``sigma_m``: the 1-sigma of its lateral
+    position, metres), or why the pair is refused: from the pairs' geometry alone (no thumbnail, no
+    surface, relief, too loose a prior, too little overlap), before any image is prepared."""
+    if A is None or B is None:
+        return "no thumbnail"
+    if A.surface is None or B.surface is None:
+        return "too few stereo points for a surface"
+    relief = max(A.surface.relief_m, B.surface.relief_m)
+    if relief > settings.max_relief_m:
+        return f"not near-planar (relief {100 * relief:.1f} cm)"
+    window = settings.window_sigmas * sigma_m + settings.window_margin_m
+    if window > settings.max_window_m:
+        return f"prior too uncertain (search radius {100 * window:.0f} cm)"
+    S = se3(A.R1, np.zeros(3))
+    T_rect = S @ T_prior @ se3_inverse(S)
+    h, w = B.coarse_shape
     cam = B.camera_coarse
-    m = max(1, int(np.ceil(window_m * cam.fx / B.surface.range_m)))
+    m = max(1, int(np.ceil(window * cam.fx / B.surface.range_m)))
     u, v = np.meshgrid(np.arange(-m, w + m, dtype=float), np.arange(-m, h + m, dtype=float))
     X = _points_of_pixels(B.surface, cam, u, v)
+    _, _, inside = _projected(
+        A.camera_coarse, A.coarse_shape, se3_apply(_turn(T_rect, -settings.yaw_range_rad), X)
+    )
+    core = inside[m : m + h, m : m + w]
+    box = inscribed_box(core)
+    if core.mean() < settings.min_overlap or box is None:
+        return "overlap too small"
+    return Search(T_rect, window, m, X, box)
+
+
+def coarse_search(A: Prepared, B: Prepared, search: Search, settings: DirectSettings) -> CoarseResult | None:
+    """Correlation over yaw and shift at half resolution (module docstring, step 2) where ``search``
+    says; None when no shift is seen whole."""
+    img_b = B.image_coarse
+    cam_a, cam = A.geometry.camera_coarse, B.geometry.camera_coarse
+    m, X, (r0, r1, c0, c1) = search.margin, search.points, search.box
     yaws = np.arange(-settings.yaw_range_rad, settings.yaw_range_rad + 1e-9, settings.yaw_step_rad)
     maps = []
-    box = None
     for dyaw in yaws:
-        T = _turn(T_prior, dyaw)
-        warped, inside = _sample(A.image_coarse, A.camera_coarse, se3_apply(T, X))
-        if box is None:
-            core = inside[m : m + h, m : m + w]
-            box = inscribed_box(core)
-            if core.mean() < settings.min_overlap or box is None:
-                return None
-        r0, r1, c0, c1 = box
+        warped, inside = _sample(A.image_coarse, cam_a, se3_apply(_turn(search.T_rect, dyaw), X))
         corr = cv2.matchTemplate(
             warped[r0 : r1 + 2 * m, c0 : c1 + 2 * m], img_b[r0:r1, c0:c1], cv2.TM_CCOEFF_NORMED
         )
@@ -480,7 +573,6 @@ def coarse_search(
         )
         corr[seen < 0.95 * (r1 - r0) * (c1 - c0)] = -1.0
         maps.append(corr)
-    assert box is not None
     stack = np.stack(maps)
     yy, xx = np.mgrid[-m : m + 1, -m : m + 1]
     stack[:, yy**2 + xx**2 > m * m] = -1.0
@@ -499,13 +591,15 @@ def coarse_search(
     if len(kept) > settings.max_peaks:
         return CoarseResult([], len(kept))
     order = np.array(kept, dtype=np.intp)
-    scale = (B.surface.range_m / cam.fx, B.surface.range_m / cam.fy)
+    surface = B.geometry.surface
+    assert surface is not None  # plan_search refuses pairs without one
+    scale = (surface.range_m / cam.fx, surface.range_m / cam.fy)
     peaks = []
     for y, x in zip(iy[order], ix[order], strict=True):
         k = int(which[y, x])
         edge = (x - m) ** 2 + (y - m) ** 2 > (m - 1.5) ** 2 or (len(yaws) > 1 and k in (0, len(yaws) - 1))
         shift = ((x - m) * scale[0], (y - m) * scale[1])
-        peaks.append((_turn(T_prior, float(yaws[k]), shift), float(flat[y, x]), bool(edge)))
+        peaks.append((_turn(search.T_rect, float(yaws[k]), shift), float(flat[y, x]), bool(edge)))
     return CoarseResult(peaks, len(kept))
 
 
@@ -551,7 +645,27 @@ def overlap_points(
     return (X[:, 2] > 0) & (u >= 0) & (u <= shape[1] - 1) & (v >= 0) & (v <= shape[0] - 1)
 
 
-def refine(A: Prepared, B: Prepared, T0: FloatArray, settings: DirectSettings) -> Refined | None:
+def lift(B: Prepared, stride: int) -> tuple[FloatArray, NDArray[np.float32]]:
+    """Every ``stride``-th pixel of B's image (each axis) lifted to 3-D by its surface (rectified
+    frame, (N, 3)), and the image there (N,): what :func:`refine` compares with A's image."""
+    surface = B.geometry.surface
+    assert surface is not None  # plan_search refuses pairs without one
+    h, w = B.image_grad.shape[:2]
+    u, v = np.meshgrid(
+        np.arange(stride / 2, w - 1, stride, dtype=float), np.arange(stride / 2, h - 1, stride, dtype=float)
+    )
+    Xb = _points_of_pixels(surface, B.geometry.camera, u.ravel(), v.ravel())
+    image = cv2.remap(B.image_grad, u.astype(np.float32), v.astype(np.float32), cv2.INTER_LINEAR)
+    return Xb, image[..., 0].ravel()
+
+
+def refine(
+    A: Prepared,
+    B: Prepared,
+    T0: FloatArray,
+    settings: DirectSettings,
+    lifted: tuple[FloatArray, NDArray[np.float32]],
+) -> Refined | None:
     """The relative pose by Gauss-Newton on the images, its tilt held at ``T0``'s; None when too
     little overlaps.
 
@@ -563,13 +677,10 @@ def refine(A: Prepared, B: Prepared, T0: FloatArray, settings: DirectSettings) -
     parallax of relief finer than the surfaces, and the uncertainty of B's range (which scales the
     whole motion); it is turned at the end into the registration's perturbation about A's camera.
     """
-    assert A.surface is not None and B.surface is not None
-    h, w = B.image_grad.shape[:2]
-    s = settings.stride
-    u, v = np.meshgrid(np.arange(s / 2, w - 1, s, dtype=float), np.arange(s / 2, h - 1, s, dtype=float))
-    Xb = _points_of_pixels(B.surface, B.camera, u.ravel(), v.ravel())
-    Ib = cv2.remap(B.image_grad, u.astype(np.float32), v.astype(np.float32), cv2.INTER_LINEAR)[..., 0].ravel()
-    cam = A.camera
+    ga, gb = A.geometry, B.geometry
+    assert ga.surface is not None and gb.surface is not None
+    Xb, Ib = lifted
+    cam = ga.camera
     R, t = T0[:3, :3].copy(), T0[:3, 3].copy()
     Xa = se3_apply(se3(R, t), Xb)
     looks, inside = _sample(A.image_grad, cam, Xa)
@@ -597,7 +708,9 @@ def refine(A: Prepared, B: Prepared, T0: FloatArray, settings: DirectSettings) -
         dI = np.column_stack([a_u, a_v, -(a_u * Xs[:, 0] + a_v * Xs[:, 1]) / z])
         J = np.empty((len(used), 6))
         J[:, :3] = dI
-        J[:, 3:] = np.cross(Xs - pivot, dI)
+        # (X_a - pivot) x dI by components: numpy's cross computes the same products four times slower
+        (l0, l1, l2), (d0, d1, d2) = (Xs - pivot).T, dI.T
+        J[:, 3], J[:, 4], J[:, 5] = l1 * d2 - l2 * d1, l2 * d0 - l0 * d2, l0 * d1 - l1 * d0
         wp = _huber(np.abs(r) / sigma_r, settings.huber_k) / sigma_r**2
         H = J.T @ (J * wp[:, None])
         step = np.zeros(6)
@@ -628,11 +741,11 @@ def refine(A: Prepared, B: Prepared, T0: FloatArray, settings: DirectSettings) -
     # cameras a baseline b apart at range Z, is displaced by h b / Z between the views), and B's
     # range, whose relative error scales the whole motion
     baseline = float(np.linalg.norm(t))
-    relief = max(A.surface.relief_m, B.surface.relief_m)
+    relief = max(ga.surface.relief_m, gb.surface.relief_m)
     parallax = relief * baseline / float(np.median(z))
     reach = float(np.sqrt(np.mean(np.sum((Xs[:, :2] - pivot[:2]) ** 2, axis=1))))
     ray = pivot_b[:2] / pivot_b[2]
-    scale = baseline * pivot_b[2] * np.sqrt(B.surface.variance(ray[0], ray[1]))
+    scale = baseline * pivot_b[2] * np.sqrt(gb.surface.variance(ray[0], ray[1]))
     cov_images += np.diag([parallax**2 + scale**2, parallax**2 + scale**2, scale**2, (parallax / reach) ** 2])
     # B's surface tilted by a small angle (its inverse depth scaled by 1 + a x + b y) moves its lifted
     # pixels by -X_b x (or y): the solution's sensitivity to that tilt, times its 1-sigma
@@ -659,7 +772,7 @@ def refine(A: Prepared, B: Prepared, T0: FloatArray, settings: DirectSettings) -
         anisotropy,
         float(np.corrcoef(Ia, ib)[0, 1]),
         n_pix,
-        int(overlap_points(B.p_rect_m, se3(R, t), cam, A.image_grad.shape[:2]).sum()),
+        int(overlap_points(gb.p_rect_m, se3(R, t), cam, ga.shape).sum()),
         float(np.sqrt(np.sum(wp * r * r) / max(n_pix - 4, 1))),
     )
 
@@ -680,49 +793,38 @@ def _huber(a: FloatArray, k: float) -> FloatArray:
     return np.where(a <= k, 1.0, k / np.maximum(a, 1e-12))
 
 
-def register_direct(
-    A: Prepared | None,
-    B: Prepared | None,
-    T_prior: FloatArray,
-    sigma_m: float,
-    settings: DirectSettings,
-) -> Registration:
+def rejected(reason: str, T: FloatArray | None = None) -> Registration:
+    """A refused registration, with its reason (and the pose it reached, when it reached one)."""
+    return Registration(
+        False, reason, np.eye(4) if T is None else T, np.full((6, 6), np.nan), 0, 0, float("nan")
+    )
+
+
+def register_direct(A: Prepared, B: Prepared, search: Search, settings: DirectSettings) -> Registration:
     """Estimate ``T_a_b`` (pair B's left camera in pair A's, unrectified camera frames, as
-    :func:`auvnav.vision.registration.register`) photometrically (module docstring).
-
-    ``T_prior``: the prior ``T_a_b``; ``sigma_m``: the 1-sigma of its lateral position, metres.
-    """
-
-    def reject(reason: str, T: FloatArray | None = None) -> Registration:
-        return Registration(
-            False, reason, np.eye(4) if T is None else T, np.full((6, 6), np.nan), 0, 0, float("nan")
-        )
-
-    if A is None or B is None:
-        return reject("no thumbnail")
-    if A.surface is None or B.surface is None:
-        return reject("too few stereo points for a surface")
-    relief = max(A.surface.relief_m, B.surface.relief_m)
-    if relief > settings.max_relief_m:
-        return reject(f"not near-planar (relief {100 * relief:.1f} cm)")
-    S = se3(A.R1, np.zeros(3))
-    S_inv = se3_inverse(S)
-    T_rect = S @ T_prior @ S_inv
-    window = settings.window_sigmas * sigma_m + settings.window_margin_m
-    if window > settings.max_window_m:
-        return reject(f"prior too uncertain (search radius {100 * window:.0f} cm)")
-    coarse = coarse_search(A, B, T_rect, window, settings)
+    :func:`auvnav.vision.registration.register`) photometrically (module docstring), within the
+    search :func:`plan_search` planned for the pairs' geometry."""
+    ga, gb = A.geometry, B.geometry
+    assert gb.surface is not None  # plan_search refuses pairs without one
+    coarse = coarse_search(A, B, search, settings)
     if coarse is None:
-        return reject("overlap too small")
+        return rejected("overlap too small")
     if not coarse.peaks:
-        return reject(f"ambiguous ({coarse.candidates} peaks within the window)")
+        return rejected(f"ambiguous ({coarse.candidates} peaks within the window)")
     # refine from every peak; peaks that converge together are one mode
-    X_b = _points_of_pixels(B.surface, B.camera, np.array(B.camera.cx), np.array(B.camera.cy))
+    X_b = _points_of_pixels(gb.surface, gb.camera, np.array(gb.camera.cx), np.array(gb.camera.cy))
     modes: list[tuple[Refined, bool, FloatArray]] = []
-    quick = replace(settings, iterations=settings.candidate_iterations, stride=2 * settings.stride)
+    many = len(coarse.peaks) > 1
+    first = (
+        replace(settings, iterations=settings.candidate_iterations, stride=2 * settings.stride)
+        if many
+        else settings
+    )
+    lifted = lift(B, first.stride)
+    T_rect, window = search.T_rect, search.window_m
     start = T_rect[:3, :3] @ X_b + T_rect[:3, 3]
     for T0, _, edge in coarse.peaks:
-        fine = refine(A, B, T0, quick if len(coarse.peaks) > 1 else settings)
+        fine = refine(A, B, T0, first, lifted)
         if fine is None:
             continue
         where = fine.T_a_b[:3, :3] @ X_b + fine.T_a_b[:3, 3]
@@ -736,22 +838,23 @@ def register_direct(
         elif fine.correlation > modes[same[0]][0].correlation:
             modes[same[0]] = (fine, edge, where)
     if not modes:
-        return reject("no refinement stayed in the search window")
+        return rejected("no refinement stayed in the search window")
     modes.sort(key=lambda mode: -mode[0].correlation)
     fine, edge, _ = modes[0]
-    if len(coarse.peaks) > 1:  # the winner refined to convergence
-        fine = refine(A, B, fine.T_a_b, settings) or fine
-    T = S_inv @ fine.T_a_b @ S
+    if many:  # the winner refined to convergence
+        fine = refine(A, B, fine.T_a_b, settings, lift(B, settings.stride)) or fine
+    S = se3(ga.R1, np.zeros(3))
+    T = se3_inverse(S) @ fine.T_a_b @ S
     if fine.correlation < settings.min_correlation:
-        return reject(f"poor correlation ({fine.correlation:.2f} < {settings.min_correlation})", T)
+        return rejected(f"poor correlation ({fine.correlation:.2f} < {settings.min_correlation})", T)
     if len(modes) > 1:
         second = modes[1][0].correlation
         if fine.correlation - second < settings.ambiguity_margin * (1.0 - fine.correlation):
-            return reject(f"ambiguous (correlation {fine.correlation:.3f}, another mode {second:.3f})", T)
+            return rejected(f"ambiguous (correlation {fine.correlation:.3f}, another mode {second:.3f})", T)
     if edge:
-        return reject("best correlation at the edge of the search", T)
+        return rejected("best correlation at the edge of the search", T)
     if fine.anisotropy > settings.max_anisotropy:
-        return reject(
+        return rejected(
             f"one-dimensional texture (the images fix one direction {fine.anisotropy:.0f} times better)", T
         )
     across, along = np.sqrt(np.maximum(np.linalg.eigvalsh(fine.in_plane_covariance[:2, :2]), 0.0))
@@ -761,12 +864,12 @@ def register_direct(
         and along <= settings.max_along_sigma_m
         and yaw_sigma <= settings.max_yaw_sigma_rad
     ):
-        return reject(
+        return rejected(
             f"pose too uncertain (sigma {across:.3f} m across, {along:.3f} m along, {np.degrees(yaw_sigma):.2f} deg)",
             T,
         )
     # (dt, dtheta) of the rectified frames into the camera frames: both rotate by R1^T.
-    R1t = A.R1.T
+    R1t = ga.R1.T
     G = np.zeros((6, 6))
     G[:3, :3] = G[3:, 3:] = R1t
     return Registration(

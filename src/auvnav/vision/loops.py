@@ -69,10 +69,19 @@ from auvnav.vision.candidates import (
     candidate_pairs,
     footprints,
 )
-from auvnav.vision.direct import DirectSettings, Prepared, prepare, register_direct
+from auvnav.vision.direct import (
+    DirectSettings,
+    Geometry,
+    Prepared,
+    pair_geometry,
+    plan_search,
+    prepare,
+    register_direct,
+    rejected,
+)
 from auvnav.vision.features import FeatureSettings, Vocabulary, build_vocabulary
 from auvnav.vision.loopfile import LoopClosures, loops_from_transforms
-from auvnav.vision.registration import RegistrationSettings, expm_so3, register
+from auvnav.vision.registration import Registration, RegistrationSettings, expm_so3, register
 from auvnav.vision.stereo import cache_path, pair_features, read_features
 
 log = logging.getLogger(__name__)
@@ -215,10 +224,30 @@ def _features_task(ctx: _Context, items: list[tuple[int, str, str]]) -> list[tup
 _load = lru_cache(maxsize=512)(read_features)  # each worker's recently used feature files
 
 
+@lru_cache(maxsize=512)
+def _geometry(path: str, settings: DirectSettings) -> Geometry | None:
+    """A pair's geometry for the direct registration (each worker's recently used: small)."""
+    return pair_geometry(_load(path), settings)
+
+
 @lru_cache(maxsize=128)
 def _prepared(path: str, settings: DirectSettings) -> Prepared | None:
-    """A pair's data for the direct registration (each worker's recently used)."""
-    return prepare(_load(path), settings)
+    """A pair's images for the direct registration (each worker's recently used: 1 MB each)."""
+    return prepare(_load(path), settings, _geometry(path, settings))
+
+
+def _register_direct(
+    pi: str, pj: str, T_prior: FloatArray, sigma_m: float, settings: DirectSettings
+) -> Registration:
+    """The direct registration of pair ``pj`` in pair ``pi``: its images prepared only when the pairs'
+    geometry does not refuse it (as most candidates are refused)."""
+    search = plan_search(_geometry(pi, settings), _geometry(pj, settings), T_prior, sigma_m, settings)
+    if isinstance(search, str):
+        return rejected(search)
+    A, B = _prepared(pi, settings), _prepared(pj, settings)
+    if A is None or B is None:
+        return rejected("thumbnail unreadable")
+    return register_direct(A, B, search, settings)
 
 
 _REASON_BYTES = 160
@@ -252,13 +281,7 @@ def _verify_task(ctx: _Context, items: list[WorkItem]) -> list[Verification]:
         reg = register(_load(pi), _load(pj), reg_settings, prior=(T_prior, sigma), vocabulary=ctx.vocabulary)
         reason, by_images = reg.reason, False
         if not reg.accepted and direct is not None:
-            again = register_direct(
-                _prepared(pi, direct),
-                _prepared(pj, direct),
-                T_near,
-                sigma_near,
-                direct,
-            )
+            again = _register_direct(pi, pj, T_near, sigma_near, direct)
             by_images = again.accepted
             reg = again if again.accepted else reg
             reason = "" if again.accepted else f"{reason}; direct: {again.reason}"

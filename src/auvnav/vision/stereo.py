@@ -160,11 +160,23 @@ class StereoFeatures:
     def __len__(self) -> int:
         return len(self.p_cam_m)
 
+    def thumbnail_shape(self) -> tuple[int, int] | None:
+        """The thumbnail's rows and columns from its PNG header (the image is not decoded), or None
+        when there is none (or its header is not a PNG's)."""
+        if not self.thumbnail or self.thumbnail[:8] != _PNG_SIGNATURE or self.thumbnail[12:16] != b"IHDR":
+            return None
+        width, height = struct.unpack(">II", self.thumbnail[16:24])
+        return height, width
+
     def thumbnail_image(self) -> NDArray[np.uint8] | None:
         """The decoded thumbnail (grey, uint8), or None."""
         if not self.thumbnail:
             return None
         return cv2.imdecode(np.frombuffer(self.thumbnail, dtype=np.uint8), cv2.IMREAD_GRAYSCALE)
+
+
+#: The eight bytes that open a PNG file; its first chunk, IHDR, then gives the width and height.
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
 def make_thumbnail(rectified_left: NDArray[np.uint8], scale: float) -> tuple[bytes, tuple[float, float]]:
