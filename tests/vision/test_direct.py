@@ -178,6 +178,10 @@ def test_a_loose_prior_no_thumbnail_or_no_overlap_is_refused_from_the_geometry(b
     cut = replace(fa, thumbnail=fa.thumbnail[:64])
     assert pair_geometry(cut, settings).shape == A.shape
     assert prepare(cut, settings) is None
+    # a header whose size no thumbnail has (a flipped bit): no geometry
+    header = bytearray(fa.thumbnail)
+    header[16:20] = (3).to_bytes(4, "big")
+    assert pair_geometry(replace(fa, thumbnail=bytes(header)), settings) is None
     assert plan_search(None, B, true_relative(), 0.01, settings) == "no thumbnail"
     # B a whole footprint (2.5 m at 20 m) off to the side: nothing to compare
     away = true_relative() @ se3(np.eye(3), np.array([2.5, 0.0, 0.0]))

@@ -162,11 +162,11 @@ class StereoFeatures:
 
     def thumbnail_shape(self) -> tuple[int, int] | None:
         """The thumbnail's rows and columns from its PNG header (the image is not decoded), or None
-        when there is none (or its header is not a PNG's)."""
+        when there is none (or its header is not a PNG's, or gives a size no thumbnail has)."""
         if not self.thumbnail or self.thumbnail[:8] != _PNG_SIGNATURE or self.thumbnail[12:16] != b"IHDR":
             return None
         width, height = struct.unpack(">II", self.thumbnail[16:24])
-        return height, width
+        return (height, width) if min(width, height) >= THUMBNAIL_MIN_PX else None
 
     def thumbnail_image(self) -> NDArray[np.uint8] | None:
         """The decoded thumbnail (grey, uint8), or None."""
@@ -175,6 +175,8 @@ class StereoFeatures:
         return cv2.imdecode(np.frombuffer(self.thumbnail, dtype=np.uint8), cv2.IMREAD_GRAYSCALE)
 
 
+#: The smallest side of a thumbnail, pixels.
+THUMBNAIL_MIN_PX = 8
 #: The eight bytes that open a PNG file; its first chunk, IHDR, then gives the width and height.
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -183,7 +185,7 @@ def make_thumbnail(rectified_left: NDArray[np.uint8], scale: float) -> tuple[byt
     """The illumination-corrected, rectified left image reduced by ``scale`` (area averaging), as PNG
     (compression level :data:`THUMBNAIL_PNG_LEVEL`), and its width and height over the image's."""
     h, w = rectified_left.shape
-    size = (max(8, round(w * scale)), max(8, round(h * scale)))
+    size = (max(THUMBNAIL_MIN_PX, round(w * scale)), max(THUMBNAIL_MIN_PX, round(h * scale)))
     small = cv2.resize(rectified_left, size, interpolation=cv2.INTER_AREA)
     ok, encoded = cv2.imencode(".png", small, [cv2.IMWRITE_PNG_COMPRESSION, THUMBNAIL_PNG_LEVEL])
     if not ok:
