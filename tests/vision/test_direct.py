@@ -225,25 +225,42 @@ def test_stripes_are_never_a_position(level_floor) -> None:
         assert reg.reason.startswith(refusals), reg.reason
 
 
-def test_the_surface_follows_relief_coarser_than_its_grid_and_measures_what_is_finer() -> None:
+def test_the_surface_measures_the_relief_its_grid_misses_not_the_noise_its_points_understate() -> None:
     camera = Pinhole(443.0, 443.0, 169.5, 127.5)
     shape = (256, 340)
     rng = np.random.default_rng(3)
     u, v = rng.uniform(0, 339, 1500), rng.uniform(0, 255, 1500)
     x, y = camera.normalised(u, v)
+    heads = rng.uniform([-0.4, -0.3], [0.4, 0.3], (40, 2))  # coral heads about 10 cm across
 
-    def depth(x, y, fine):
+    def depth(x, y, height):
         smooth = 2.0 + 0.05 * x + 0.1 * np.sin(2.0 * y) + 0.05 * x * y
-        return smooth + fine * np.sin(2 * np.pi * 40 * x) * np.sin(2 * np.pi * 40 * y)
+        bumps = np.exp(
+            -((x[..., None] - heads[:, 0]) ** 2 + (y[..., None] - heads[:, 1]) ** 2) / 0.025**2 / 2
+        )
+        return smooth - height * bumps.sum(axis=-1)
 
-    for fine, relief in ((0.0, (0.0, 0.004)), (0.03, (0.01, 0.03))):
-        z = depth(x, y, fine) + rng.normal(0, 0.005, x.size)  # 5 mm of stereo noise
+    def fit(height: float, noise_m: float, stated_m: float):
+        """The surface of points with ``noise_m`` of range noise whose stereo states ``stated_m``."""
+        z = depth(x, y, height) + rng.normal(0, noise_m, x.size)
         points = np.column_stack([x * z, y * z, z])
-        sigma_inverse = np.full(x.size, 0.005) / z**2
-        surface = fit_surface(points, sigma_inverse, camera, shape, DirectSettings())
+        surface = fit_surface(points, np.full(x.size, stated_m) / z**2, camera, shape, DirectSettings())
         assert surface is not None
-        gx, gy = np.meshgrid(np.linspace(x.min(), x.max(), 20), np.linspace(y.min(), y.max(), 15))
-        error = 1.0 / surface.inverse_depth(gx, gy) - depth(gx, gy, 0.0)
-        assert np.sqrt(np.mean(error**2)) < 0.006  # the smooth floor to a few millimetres
-        assert relief[0] <= surface.relief_m <= relief[1]
-    assert fit_surface(points[:10], sigma_inverse[:10], camera, shape, DirectSettings()) is None
+        return surface, points
+
+    grid = np.meshgrid(np.linspace(x.min(), x.max(), 20), np.linspace(y.min(), y.max(), 15))
+    flat, points = fit(0.0, 0.005, 0.005)
+    error = 1.0 / flat.inverse_depth(*grid) - depth(*grid, 0.0)
+    assert np.sqrt(np.mean(error**2)) < 0.006  # the smooth floor to a few millimetres
+    assert flat.relief_m < 0.004
+    # coral heads 10 cm high (their heights' spread over the image: 4 cm) are relief
+    assert 0.01 <= fit(0.1, 0.005, 0.005)[0].relief_m <= 0.04
+    # points four times noisier than their stereo says (the tracker sliding along ripple crests) are
+    # not: the surface is as uncertain as when the noise is stated, not rough
+    understated, honest = fit(0.0, 0.02, 0.005)[0], fit(0.0, 0.02, 0.02)[0]
+    assert understated.relief_m < 0.004
+    assert understated.variance(0.0, 0.0) >= 0.8 * honest.variance(0.0, 0.0)
+    assert (
+        fit_surface(points[:10], np.full(10, 0.005) / points[:10, 2] ** 2, camera, shape, DirectSettings())
+        is None
+    )
