@@ -54,9 +54,10 @@ prepared (:func:`prepare`): on the check dive's first 900 s in turbid water that
 1,612 candidates the features leave, and the images of 389 pairs are prepared instead of 1,619.
 
 On the check dive's first 900 s at half scale (``benchmarks/bench_vision.py --seconds 900``), the
-pairs it registers are 1.4-1.5 cm and 0.40-0.44 degrees from the truth (median; the features' are
-2.5-6.1 mm and 0.07-0.17 degrees), and 6 of 819 are wrong, 2 in each of clear, coastal and turbid
-water.
+pairs it registers are 1.4-1.5 cm and 0.41-0.44 degrees from the truth (median; the features' are
+2.5-6.1 mm and 0.07-0.17 degrees), and 10 of 907 are wrong: 2 / 4 / 4 in clear / coastal / turbid
+water, the new ones since the surfaces tell relief from noise consecutive pairs 3-7 cm off in range or
+1-2.4 degrees in yaw.
 """
 
 from __future__ import annotations
