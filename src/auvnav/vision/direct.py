@@ -63,6 +63,7 @@ water, the new ones since the surfaces tell relief from noise consecutive pairs 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -290,29 +291,24 @@ def fit_surface(
     dx, dy = (x1 - x0) / (nx - 1), (y1 - y0) / (ny - 1)
     rows, weights = _bilinear(x, y, x0, y0, dx, dy, (ny, nx))
     K = nx * ny
-    A = np.zeros((len(w), K))
-    np.put_along_axis(A, rows, weights, axis=1)
-    # second differences along rows and columns of the grid
-    idx = np.arange(K).reshape(ny, nx)
-    D = []
-    for a, b, c in ((idx[:, :-2], idx[:, 1:-1], idx[:, 2:]), (idx[:-2], idx[1:-1], idx[2:])):
-        block = np.zeros((a.size, K))
-        r = np.arange(a.size)
-        block[r, a.ravel()] = 1.0
-        block[r, b.ravel()] = -2.0
-        block[r, c.ravel()] = 1.0
-        D.append(block)
-    Dm = np.concatenate(D)
+    # each point's four knots: the normal matrix A^T W A of the sparse design A, summed pair by pair
+    pairs = (rows[:, :, None] * K + rows[:, None, :]).ravel()
+    products = weights[:, :, None] * weights[:, None, :]
+
+    def normal(wt: FloatArray) -> FloatArray:
+        return np.bincount(pairs, (products * wt[:, None, None]).ravel(), minlength=K * K).reshape(K, K)
+
     range_m = float(np.median(z))
     smooth = settings.surface_roughness_m / range_m**2  # height -> inverse depth
     noise2 = sigma_inverse_m**2
     weight = 1.0 / noise2
-    prior = Dm.T @ Dm / smooth**2 + np.eye(K) * 1e-6 / float(np.median(w)) ** 2
+    prior = _second_differences(ny, nx) / smooth**2 + np.eye(K) * 1e-6 / float(np.median(w)) ** 2
     values = np.zeros(K)
     sigma = 0.0
     for _ in range(3):
-        values = np.linalg.solve(A.T @ (A * weight[:, None]) + prior, A.T @ (weight * w))
-        r = w - A @ values
+        rhs = np.bincount(rows.ravel(), (weights * (weight * w)[:, None]).ravel(), minlength=K)
+        values = np.linalg.solve(normal(weight) + prior, rhs)
+        r = w - np.sum(values[rows] * weights, axis=1)
         sigma = 1.4826 * float(np.median(np.abs(r))) + 1e-12
         weight = _huber(np.abs(r) / np.sqrt(noise2 + sigma**2), 2.0) / noise2
     unexplained = max(0.0, sigma**2 - float(np.median(noise2)))
@@ -323,7 +319,7 @@ def fit_surface(
     noise2 = noise2 * (1.0 + (unexplained - relief2) / float(np.median(noise2)))
     # the knots' covariance, each point's variance its noise and the relief the grid misses, and the
     # part of that extra noise common to the whole pair
-    covariance = np.linalg.inv(A.T @ (A * (weight * noise2 / (noise2 + relief2))[:, None]) + prior)
+    covariance = np.linalg.inv(normal(weight * noise2 / (noise2 + relief2)) + prior)
     covariance += (SURFACE_BIAS_FRACTION**2 * (unexplained - relief2)) * np.ones((K, K))
     return Surface(
         values.reshape(ny, nx),
@@ -335,6 +331,22 @@ def fit_surface(
         np.sqrt(relief2) * range_m**2,
         range_m,
     )
+
+
+@lru_cache(maxsize=8)
+def _second_differences(ny: int, nx: int) -> FloatArray:
+    """``D^T D`` of the second differences along the rows and the columns of a grid of knots."""
+    idx = np.arange(ny * nx).reshape(ny, nx)
+    blocks = []
+    for a, b, c in ((idx[:, :-2], idx[:, 1:-1], idx[:, 2:]), (idx[:-2], idx[1:-1], idx[2:])):
+        block = np.zeros((a.size, ny * nx))
+        r = np.arange(a.size)
+        block[r, a.ravel()] = 1.0
+        block[r, b.ravel()] = -2.0
+        block[r, c.ravel()] = 1.0
+        blocks.append(block)
+    D = np.concatenate(blocks)
+    return D.T @ D
 
 
 def _neighbour_covariance(r: FloatArray, u: FloatArray, v: FloatArray, lag_px: tuple[float, float]) -> float:

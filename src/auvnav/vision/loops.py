@@ -224,9 +224,11 @@ def _features_task(ctx: _Context, items: list[tuple[int, str, str]]) -> list[tup
 _load = lru_cache(maxsize=512)(read_features)  # each worker's recently used feature files
 
 
-@lru_cache(maxsize=512)
+@lru_cache(maxsize=2048)
 def _geometry(path: str, settings: DirectSettings) -> Geometry | None:
-    """A pair's geometry for the direct registration (each worker's recently used: small)."""
+    """A pair's geometry for the direct registration (each worker's recently used: about 60 KB each;
+    over the whole check dive in turbid water 512 of them were refitted 5 times a pair, 2,048 of them
+    2.6 times)."""
     return pair_geometry(_load(path), settings)
 
 
