@@ -361,11 +361,12 @@ def _neighbour_covariance(r: FloatArray, u: FloatArray, v: FloatArray, lag_px: t
     if len(a) < 30:
         return 0.0
     ra, rb = r[a], r[nearest[a, b]]
+    return (_robust_sigma(ra + rb) ** 2 - _robust_sigma(ra - rb) ** 2) / 4.0
 
-    def mad2(x: FloatArray) -> float:
-        return (1.4826 * float(np.median(np.abs(x - np.median(x))))) ** 2
 
-    return (mad2(ra + rb) - mad2(ra - rb)) / 4.0
+def _robust_sigma(x: FloatArray) -> float:
+    """1.4826 times the median absolute deviation of ``x``: its standard deviation, were it normal."""
+    return 1.4826 * float(np.median(np.abs(x - np.median(x))))
 
 
 @dataclass(frozen=True)
@@ -402,8 +403,8 @@ class Geometry:
     shape : (int, int)
         The thumbnail's rows and columns.
     surface : Surface or None
-    p_rect_m, sigma_inverse_m : ndarray
-        The stereo points in the rectified frame (N, 3) and each one's inverse-depth 1-sigma (N,).
+    p_rect_m : ndarray
+        The stereo points in the rectified frame (N, 3).
     R1 : ndarray, shape (3, 3)
         The rotation of the left camera's frame into the rectified one.
     """
@@ -412,7 +413,6 @@ class Geometry:
     shape: tuple[int, int]
     surface: Surface | None
     p_rect_m: FloatArray
-    sigma_inverse_m: FloatArray
     R1: FloatArray
 
     @property
@@ -466,7 +466,7 @@ def pair_geometry(features: StereoFeatures, settings: DirectSettings) -> Geometr
     cov_z = np.einsum("i,nij,j->n", R1[2], features.cov_cam_m2, R1[2])
     sigma_inv = np.sqrt(np.maximum(cov_z, 0.0)) / p[:, 2] ** 2
     surface = fit_surface(p, sigma_inv, camera, shape, settings)
-    return Geometry(camera, shape, surface, p, sigma_inv, R1)
+    return Geometry(camera, shape, surface, p, R1)
 
 
 def prepare(
@@ -774,7 +774,7 @@ def refine(
         # a normalised cross-correlation, which sliding into a blank patch of A cannot lower
         scale_a = 1.0 / max(float(Ia.std()), 1e-6)
         r = _standardised(Ia) - _standardised(ib)
-        sigma_r = 1.4826 * float(np.median(np.abs(r - np.median(r)))) + 1e-9
+        sigma_r = _robust_sigma(r) + 1e-9
         z = Xs[:, 2]
         # d I / d X_a = (gu fx, gv fy, -(gu fx x + gv fy y) / z) / z; d X_a / d(dt, dtheta) = [I, -[X_a - pivot]x]
         a_u, a_v = scale_a * gu * cam.fx / z, scale_a * gv * cam.fy / z
