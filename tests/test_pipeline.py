@@ -132,6 +132,29 @@ def test_a_dive_without_images_is_navigated_and_the_rest_skipped_with_reasons(tm
     assert stages["compass"]["status"] == stages["depth"]["status"] == "skipped"
 
 
+def test_bad_input_leaves_a_new_dive_without_a_products_folder(tmp_path: Path, capsys) -> None:
+    """The lock and the file hashes are the run's bookkeeping: a run that fails before any stage
+    writes takes them away again, and a run that succeeds keeps them."""
+    dive = tmp_path / "transit"
+    assert (
+        main(["simulate", "transit", "--out", str(dive), "--legs", "1", "--leg-m", "100", "--no-images"]) == 0
+    )
+    dvl = dive / "nav" / "dvl.csv"
+    good = dvl.read_text(encoding="utf-8")
+    rows = good.splitlines()
+    t, _, rest = rows[5].split(",", 2)
+    dvl.write_text("\n".join([*rows[:5], f"{t},abc,{rest}", *rows[6:]]) + "\n", encoding="utf-8")
+    capsys.readouterr()
+    for command in (["process"], ["navigate"]):
+        assert main([*command, str(dive), "-q"]) == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert "dvl.csv: row 5: column vx_mps: not a number" in err[-1]
+        assert not (dive / "products").exists(), command
+    dvl.write_text(good, encoding="utf-8")
+    assert main(["navigate", str(dive), "-q"]) == 0
+    assert (dive / "products" / "cache" / "hashes.json").is_file()
+
+
 # A caller that processes a dive and is killed part way; run as a separate process.
 RUN = [sys.executable, "-c", "import sys; from auvnav.cli import main; sys.exit(main(sys.argv[1:]))"]
 

@@ -16,7 +16,8 @@ Files are hashed once: ``products/cache/hashes.json`` remembers each file's size
 and digest, so an unchanged rerun only stats the files (images included). One ``auvnav`` at a time
 works on a dive (``products/.lock``); at the start of a run, what a killed run left (temporary
 folders and files) is removed and an interrupted swap of a stage's products is completed
-(:func:`auvnav.products.recover`).
+(:func:`auvnav.products.recover`). A run on a dive without ``products/`` that fails before any stage
+writes takes the lock and the hashes away again: bad input leaves no folder behind.
 """
 
 from __future__ import annotations
@@ -415,15 +416,29 @@ def _session(
             executor = make_executor(scheduler, workers)
         return executor
 
+    root = Path(dive) / P.PRODUCTS
+    fresh = not root.exists()
     with dive_lock(dive):
         _sweep(dive)
         hashes = FileHashes(P.cache_dir(dive, "") / HASHES_FILE)
         try:
             yield StageContext(dive, get_executor, progress, allow_outside), hashes
         finally:
-            hashes.save()
             if executor is not None:
                 executor.close()
+            if fresh and _bookkeeping_only(root):
+                shutil.rmtree(root, ignore_errors=True)  # failed before writing: leave no products folder
+            else:
+                hashes.save()
+
+
+def _bookkeeping_only(root: Path) -> bool:
+    """Whether the products folder holds nothing but the run's lock and file hashes."""
+    cache = root / P.CACHE
+    inside = {p.name for p in root.iterdir()}
+    return inside <= {LOCK_FILE, P.CACHE} and (
+        not cache.is_dir() or {p.name for p in cache.iterdir()} <= {HASHES_FILE}
+    )
 
 
 def run_stage(
