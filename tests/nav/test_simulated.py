@@ -6,7 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
+from auvnav.dive import read_dive
 from auvnav.evaluate import evaluate_dive
+from auvnav.nav.inputs import nav_inputs, smooth_tilt
 from auvnav.pipeline import run_stage
 from auvnav.sim.run import run_scenario
 from auvnav.trajectory import read_trajectory
@@ -50,3 +52,41 @@ def test_usbl_is_fused(tmp_path: Path) -> None:
     summary = run_stage(path, "nav")
     assert summary["fixes"]["usbl"]["n"] > 10
     assert summary["innovations_inside_2sigma"] >= 0.9
+
+
+def test_the_tilt_sensors_white_noise_is_smoothed_away_and_the_vehicles_pitching_kept(tmp_path: Path) -> None:
+    """The simulator's tilt sensor: 0.2 deg of white noise at 10 Hz on a vehicle that pitches and
+    rolls. The navigated pitch and roll at the DVL's samples are within half of that of the truth."""
+    path = tmp_path / "navcheck"
+    run_scenario("navcheck", path, seed=3, geometry={"headings": 2, "leg_m": 20.0, "grid_m": 4.0})
+    dive = read_dive(path)
+    inputs = nav_inputs(dive)
+    truth = read_trajectory(path / "truth/trajectory.csv").interpolate(inputs.t_s)
+    att = dive.attitude
+    errors = {
+        "smoothed": (inputs.pitch_rad, inputs.roll_rad),
+        "measured": (
+            np.interp(inputs.t_s, att.t_s, att.pitch_rad),
+            np.interp(inputs.t_s, att.t_s, att.roll_rad),
+        ),
+    }
+    sigma = dive.vehicle.pitch_roll_sigma_rad
+    rms = {
+        k: [np.sqrt(np.mean((e - t) ** 2)) for e, t in zip(v, (truth.pitch_rad, truth.roll_rad), strict=True)]
+        for k, v in errors.items()
+    }
+    assert all(0.8 * sigma < r < 1.2 * sigma for r in rms["measured"]), rms
+    assert all(r < 0.6 * sigma for r in rms["smoothed"]), rms
+    assert np.ptp(truth.pitch_rad) > 20 * sigma  # the vehicle does pitch: a mean would not do
+
+
+def test_tilt_is_smoothed_within_each_stretch_and_a_coarse_record_kept() -> None:
+    rng = np.random.default_rng(0)
+    t = np.concatenate([np.arange(0.0, 20.0, 0.1), np.arange(60.0, 80.0, 0.1)])
+    true = np.where(t < 40, 0.05 * np.sin(t), -0.3)  # a step across the gap
+    noisy = true + rng.normal(0.0, 0.0035, len(t))
+    smooth = smooth_tilt(t, noisy)
+    assert np.std(smooth - true) < 0.5 * np.std(noisy - true)
+    assert abs(smooth[t > 60][:5].mean() + 0.3) < 0.003  # no smoothing across the gap
+    coarse = t[::20]  # 0.5 Hz: fewer than 5 samples in a window
+    assert np.allclose(smooth_tilt(coarse, noisy[::20]), noisy[::20], rtol=0.0, atol=1e-12)

