@@ -426,7 +426,7 @@ def _session(
         finally:
             if executor is not None:
                 executor.close()
-            if fresh and _bookkeeping_only(root):
+            if fresh and root.is_dir() and _bookkeeping_only(root):
                 shutil.rmtree(root, ignore_errors=True)  # failed before writing: leave no products folder
             else:
                 hashes.save()
