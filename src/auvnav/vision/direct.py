@@ -54,10 +54,10 @@ prepared (:func:`prepare`): on the check dive's first 900 s in turbid water that
 1,612 candidates the features leave, and the images of 389 pairs are prepared instead of 1,619.
 
 On the check dive's first 900 s at half scale (``benchmarks/bench_vision.py --seconds 900``), the
-pairs it registers are 1.4-1.5 cm and 0.41-0.44 degrees from the truth (median; the features' are
-2.5-6.1 mm and 0.07-0.17 degrees), and 10 of 907 are wrong: 2 / 4 / 4 in clear / coastal / turbid
-water. The 4 new since the surfaces tell relief from noise: 3 consecutive pairs 3-8 cm off in range
-(one also 2.4 degrees in yaw), and a pair 6 images apart 4.6 cm off along the floor.
+pairs it registers are 9.9-10.3 mm and 0.30-0.31 degrees from the truth (median; the features' are
+2.5-6.2 mm and 0.07-0.17 degrees), and 8 of 921 are wrong: 1 / 3 / 4 in clear / coastal / turbid
+water (1.4-1.5 cm and 0.41-0.44 degrees before the navigation smoothed its pitch and roll, whose
+noise the prior's relative tilt carried into every pair).
 """
 
 from __future__ import annotations
