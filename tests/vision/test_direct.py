@@ -16,6 +16,8 @@ from auvnav.vision.camera import rectification
 from auvnav.vision.direct import (
     DirectSettings,
     Pinhole,
+    Refined,
+    along_a_line,
     fit_surface,
     inscribed_box,
     pair_geometry,
@@ -264,3 +266,49 @@ def test_the_surface_measures_the_relief_its_grid_misses_not_the_noise_its_point
         fit_surface(points[:10], np.full(10, 0.005) / points[:10, 2] ** 2, camera, shape, DirectSettings())
         is None
     )
+
+
+def look_alike(
+    x: float, y: float, turn_deg: float = 0.0, edge: bool = False
+) -> tuple[Refined, bool, np.ndarray]:
+    """A mode of the direct search: B's centre at (x, y) in A, 2 m down, turned ``turn_deg`` about the
+    optical axis, and whether its coarse peak was at the edge of the search."""
+    T = se3(euler2rot(np.radians(turn_deg), 0.0, 0.0), np.array([x, y, 0.0]))
+    refined = Refined(T, np.eye(6) * 1e-6, np.eye(4) * 1e-6, 2.0, 0.9, 1000, 100, 1.0)
+    return refined, edge, np.array([x, y, 2.0])
+
+
+def test_look_alike_places_along_a_crest_become_one_place_uncertain_along_it() -> None:
+    """Modes strung along one line (a ripple crest's faint texture cannot fix the position along it)
+    are one place: the estimate moves to the middle of their stretch, which a uniform distribution
+    along the line covers, and the crest's across position keeps its own certainty."""
+    settings = DirectSettings()
+    r = settings.mode_radius_m
+    u = np.array([np.cos(0.5), np.sin(0.5)])
+    modes = [look_alike(*(s * u), turn_deg=0.3 * s / 0.05) for s in (0.0, 0.03, -0.02, 0.05)]
+    start = np.array([0.01, -0.01, 2.0])
+    shift, extra = along_a_line(modes, start, 0.1, settings)
+    assert np.allclose(shift[:2], 0.5 * (0.05 - 0.02) * u) and shift[2] == 0.0
+    half = 0.5 * (0.07 + 2 * r)
+    assert np.allclose(extra[:2, :2], np.outer(u, u) * half**2 / 3)
+    assert np.isclose(extra[5, 5], np.radians(0.5 * 0.42) ** 2 / 3)
+    assert np.count_nonzero(extra) == 5
+    # every place on the stretch is within sqrt(3) sigma of the estimate along the line
+    along = np.array([-0.02 - r, 0.05 + r]) - shift[:2] @ u
+    assert np.all(np.abs(along) <= np.sqrt(3 * u @ extra[:2, :2] @ u) + 1e-12)
+    # a mode at the edge of the window: the line may go on beyond it, so the whole chord counts
+    edged = [*modes[:3], look_alike(*(0.05 * u), edge=True)]
+    shift, extra = along_a_line(edged, np.array([0.0, 0.0, 2.0]), 0.1, settings)
+    assert np.allclose(shift[:2], 0.0, atol=1e-12)
+    assert np.isclose(u @ extra[:2, :2] @ u, 0.1**2 / 3)
+
+
+def test_look_alikes_off_one_line_or_turned_are_not_one_place() -> None:
+    """A mode a wavelength across the crests beside two along them, or one turned further than the
+    coarse search's yaw step from the best, is another place: the pair stays ambiguous."""
+    settings = DirectSettings()
+    across = [look_alike(0.0, 0.0), look_alike(0.04, 0.0), look_alike(0.02, 0.09)]
+    assert along_a_line(across, np.zeros(3), 0.15, settings) is None
+    turned = [look_alike(0.0, 0.0), look_alike(0.03, 0.0, turn_deg=np.degrees(settings.yaw_step_rad) + 0.2)]
+    assert along_a_line(turned, np.zeros(3), 0.15, settings) is None
+    assert along_a_line([*turned[:1], look_alike(0.03, 0.0, turn_deg=0.5)], np.zeros(3), 0.15, settings)

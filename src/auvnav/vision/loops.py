@@ -671,7 +671,7 @@ def find_loops(
 def _verification_salt(settings: LoopSettings, vocabulary: Vocabulary | None) -> bytes:
     """What every verification depends on besides its pair and prior: the registration's settings and
     the vocabulary (learnt from the dive's features)."""
-    h = hashlib.sha1(f"verify/2:{asdict(settings.registration)}:{settings.direct}".encode())
+    h = hashlib.sha1(f"verify/3:{asdict(settings.registration)}:{settings.direct}".encode())
     if vocabulary is not None:
         h.update(np.ascontiguousarray(vocabulary.centres).tobytes())
     return h.digest()
