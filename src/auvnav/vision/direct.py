@@ -39,8 +39,8 @@ Steps (:func:`register_direct`):
    resolution tell a ripple field's true crest from its neighbours where they can; where they
    cannot the pair is refused, not registered to the wrong crest), unless the look-alike modes are
    one place seen along a line (:func:`along_a_line`: a crest whose faint texture does not fix the
-   position along it): the estimate is then the middle of their stretch, uncertain along it; so do
-   one-dimensional texture (``max_anisotropy``) and a poor correlation reject it.
+   position along it): the estimate is then the middle of their stretch, uncertain along it.
+   One-dimensional texture (``max_anisotropy``) and a poor correlation reject the pair too.
 4. **Covariance**: the inverse normal matrix of the images, scaled by the residuals' variance and
    ``covariance_inflation``, plus what the images cannot see: the parallax of relief finer than the
    surfaces, the error of B's range (which scales the whole motion), B's surface's tilt
@@ -883,8 +883,8 @@ def along_a_line(
 ) -> tuple[FloatArray, FloatArray] | None:
     """Look-alike modes (best first, each with whether its coarse peak was at the edge of the search and
     where it puts B's centre in A, rectified frame) that are one place seen along a line of the floor:
-    ripple crests whose faint texture does not fix the position along them. They are when all lie
-    within ``mode_radius_m`` of one line and are turned within ``yaw_step_rad`` of the best.
+    ripple crests whose faint texture does not fix the position along them. They are one place when
+    all lie within ``mode_radius_m`` of one line and are turned within ``yaw_step_rad`` of the best.
 
     Returns the shift from the best mode to the middle of the line's stretch where the place can be,
     and the covariance of ``(dt, dtheta)`` that stretch and the modes' turns add, each a uniform
