@@ -299,14 +299,14 @@ def _interp_angle(t_s: FloatArray, t_src: FloatArray, a_rad: FloatArray) -> Floa
 
 
 def smooth_tilt(t_s: FloatArray, angle_rad: FloatArray, window_s: float = TILT_SMOOTHING_S) -> FloatArray:
-    """A pitch or roll record smoothed by a local quadratic over ``window_s`` (Savitzky and Golay 1964,
-    "Smoothing and differentiation of data by simplified least squares procedures", Anal. Chem.
-    36(8)), run over each stretch without a gap (:data:`GAP_PERIODS` median periods); stretches
+    """Pitch or roll records (one per column of ``angle_rad``, or one record) smoothed along time by a
+    local quadratic over ``window_s`` (Savitzky and Golay 1964, "Smoothing and differentiation of data
+    by simplified least squares procedures", Anal. Chem. 36(8)), run over each stretch without a gap (:data:`GAP_PERIODS` median periods); stretches
     shorter than the window, and records too coarse for it (fewer than 5 samples a window), are kept
     as they are. A quadratic over a second or two follows a vehicle's pitching and rolling and
     averages the white noise of a cheap tilt sensor; an attitude already filtered is left nearly as it
     was."""
-    out = np.unwrap(np.asarray(angle_rad, dtype=float))
+    out = np.unwrap(np.asarray(angle_rad, dtype=float), axis=0)
     if len(t_s) < 5:
         return wrap_angle(out)
     steps = np.diff(t_s)
@@ -317,7 +317,7 @@ def smooth_tilt(t_s: FloatArray, angle_rad: FloatArray, window_s: float = TILT_S
     edges = np.concatenate([[0], np.flatnonzero(steps > GAP_PERIODS * period) + 1, [len(t_s)]])
     for a, b in itertools.pairwise(edges.tolist()):
         if b - a >= n:
-            out[a:b] = savgol_filter(out[a:b], n, 2)
+            out[a:b] = savgol_filter(out[a:b], n, 2, axis=0)
     return wrap_angle(out)
 
 
@@ -435,10 +435,9 @@ def nav_inputs(dive: Dive, correction: HeadingCorrection | None = None) -> NavIn
     compass_heading = _interp_angle(t, att.t_s, att.heading_rad)
     heading = compass_heading if correction is None else correction.correct(compass_heading)
     decl, decl_source = declination(dive)
+    pitch, roll = smooth_tilt(att.t_s, np.column_stack([att.pitch_rad, att.roll_rad])).T
     R_ned_compass = euler2rot(
-        magnetic2true(heading, decl),
-        np.interp(t, att.t_s, smooth_tilt(att.t_s, att.pitch_rad)),
-        _interp_angle(t, att.t_s, smooth_tilt(att.t_s, att.roll_rad)),
+        magnetic2true(heading, decl), np.interp(t, att.t_s, pitch), _interp_angle(t, att.t_s, roll)
     )
     yaw, pitch, roll = rot2euler(R_ned_compass @ dive.vehicle.compass.R_body_sensor.T)
     R_ned_body = euler2rot(yaw, pitch, roll)

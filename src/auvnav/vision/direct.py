@@ -72,7 +72,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from auvnav.frames import se3, se3_apply, se3_inverse, skew
+from auvnav.frames import rot2euler, se3, se3_apply, se3_inverse, skew
 from auvnav.vision.camera import remap_rows
 from auvnav.vision.registration import Registration, expm_so3
 from auvnav.vision.stereo import StereoFeatures
@@ -895,7 +895,7 @@ def along_a_line(
     _, _, vt = np.linalg.svd(P - P.mean(axis=0))
     u = vt[0]
     R0 = alike[0][0].T_a_b[:3, :3]
-    turns = np.array([np.arctan2(*(m.T_a_b[:3, :3] @ R0.T)[[1, 0], 0]) for m, _, _ in alike])
+    turns = rot2euler(np.array([m.T_a_b[:3, :3] for m, _, _ in alike]) @ R0.T)[0]
     radius = settings.mode_radius_m
     if np.abs(P @ np.array([-u[1], u[0]])).max() > radius or np.abs(turns).max() > settings.yaw_step_rad:
         return None
