@@ -40,6 +40,7 @@ from auvnav.frames import GeodeticOrigin
 from auvnav.streams import (
     Field,
     Stream,
+    find_gaps,
     flag_rows,
     looks_like_radians,
     read_stream,
@@ -593,7 +594,7 @@ class StreamSummary:
     start_s: float
     end_s: float
     rate_hz: float
-    gaps: list[tuple[float, float]]  # (start time, length) of gaps over 5 median periods
+    gaps: list[tuple[float, float]]  # (start time, length) of gaps (auvnav.streams.find_gaps)
 
 
 @dataclass(frozen=True)
@@ -613,8 +614,7 @@ class ValidationReport:
 
 def _summarise(name: str, file: str, t: NDArray) -> StreamSummary:
     dt_s = np.diff(t)
-    period = float(np.median(dt_s)) if dt_s.size else 0.0
-    gap_idx = np.flatnonzero(dt_s > 5 * period) if period > 0 else np.array([], dtype=int)
+    gap_idx, period = find_gaps(t)
     return StreamSummary(
         name=name,
         file=file,

@@ -380,6 +380,21 @@ def _check_time(t: NDArray, display: str, column: str) -> list[Problem]:
     )
 
 
+#: A step between samples longer than this many of the stream's own median sample periods is a gap:
+#: relative to each stream's rate, so a log sampled every 8 s is not a gap at every sample.
+GAP_PERIODS = 5.0
+
+
+def find_gaps(t_s: NDArray) -> tuple[NDArray[np.intp], float]:
+    """The gaps of increasing sample times: the indices ``i`` at which ``t_s[i + 1] - t_s[i]`` exceeds
+    :data:`GAP_PERIODS` median periods, and the median period (none and 0 with fewer than two times)."""
+    steps = np.diff(np.asarray(t_s, dtype=float))
+    period = float(np.median(steps)) if steps.size else 0.0
+    if period <= 0:
+        return np.zeros(0, dtype=np.intp), period
+    return np.flatnonzero(steps > GAP_PERIODS * period), period
+
+
 def read_table(
     path: Path, fields: tuple[Field, ...], display: str | None = None, *, time_ordered: bool = True
 ) -> tuple[dict[str, NDArray], list[Problem], list[str]]:

@@ -45,15 +45,12 @@ from auvnav.depth.pressure import depth_from_pressure, sea_pressure
 from auvnav.dive import Dive
 from auvnav.errors import InsufficientDataError
 from auvnav.frames import FloatArray, euler2rot, geodetic2ned, rot2euler, wrap_angle
+from auvnav.streams import GAP_PERIODS, find_gaps
 
 log = logging.getLogger(__name__)
 
 #: A hole in the DVL log longer than this many median periods is filled with bridged samples.
 DVL_HOLE_PERIODS = 1.5
-#: Gaps in a stream longer than this many of its own median sample periods are reported (the
-#: attitude is interpolated across them): relative to each stream's rate, so a log sampled every 8 s
-#: is not a gap at every sample (dive validation uses the same factor).
-GAP_PERIODS = 5.0
 #: Pitch and roll are smoothed by a local quadratic over this long a window, seconds
 #: (:func:`smooth_tilt`). On the simulated check dive (0.2 deg of white noise at 10 Hz, the PNI TCM2's
 #: tilt accuracy) the error at the images falls from 0.20 to 0.10 deg (1 s: 0.11; 2 s: 0.10; 3 s:
@@ -301,20 +298,19 @@ def _interp_angle(t_s: FloatArray, t_src: FloatArray, a_rad: FloatArray) -> Floa
 def smooth_tilt(t_s: FloatArray, angle_rad: FloatArray, window_s: float = TILT_SMOOTHING_S) -> FloatArray:
     """Pitch or roll records (one per column of ``angle_rad``, or one record) smoothed along time by a
     local quadratic over ``window_s`` (Savitzky and Golay 1964, "Smoothing and differentiation of data
-    by simplified least squares procedures", Anal. Chem. 36(8)), run over each stretch without a gap (:data:`GAP_PERIODS` median periods); stretches
-    shorter than the window, and records too coarse for it (fewer than 5 samples a window), are kept
-    as they are. A quadratic over a second or two follows a vehicle's pitching and rolling and
-    averages the white noise of a cheap tilt sensor; an attitude already filtered is left nearly as it
-    was."""
+    by simplified least squares procedures", Anal. Chem. 36(8)), run over each stretch without a gap
+    (:func:`auvnav.streams.find_gaps`); stretches shorter than the window, and records too coarse for
+    it (fewer than 5 samples a window), are kept as they are. A quadratic over a second or two follows
+    a vehicle's pitching and rolling and averages the white noise of a cheap tilt sensor; an attitude
+    already filtered is left nearly as it was."""
     out = np.unwrap(np.asarray(angle_rad, dtype=float), axis=0)
     if len(t_s) < 5:
         return wrap_angle(out)
-    steps = np.diff(t_s)
-    period = float(np.median(steps))
+    gaps, period = find_gaps(t_s)
     n = round(window_s / period) // 2 * 2 + 1
     if n < 5:
         return wrap_angle(out)
-    edges = np.concatenate([[0], np.flatnonzero(steps > GAP_PERIODS * period) + 1, [len(t_s)]])
+    edges = np.concatenate([[0], gaps + 1, [len(t_s)]])
     for a, b in itertools.pairwise(edges.tolist()):
         if b - a >= n:
             out[a:b] = savgol_filter(out[a:b], n, 2, axis=0)
@@ -420,17 +416,17 @@ def nav_inputs(dive: Dive, correction: HeadingCorrection | None = None) -> NavIn
     t, row = _time_base(dvl.t_s, t0, t1)
 
     # Attitude: the compass heading, corrected (eq. 5), to true north, then the compass mount removed.
-    gaps = np.diff(att.t_s[(att.t_s >= t0) & (att.t_s <= t1)])
-    limit = GAP_PERIODS * float(np.median(gaps)) if gaps.size else np.inf
-    if np.any(gaps > limit):
+    t_att = att.t_s[(att.t_s >= t0) & (att.t_s <= t1)]
+    gaps, period = find_gaps(t_att)
+    if gaps.size:
         log.warning(
             "%s/nav/attitude: %d gap(s) longer than %g median periods (%.3g s), the longest %.1f s; "
             "the attitude is interpolated",
             name,
-            np.count_nonzero(gaps > limit),
+            gaps.size,
             GAP_PERIODS,
-            limit,
-            gaps.max(),
+            GAP_PERIODS * period,
+            np.diff(t_att).max(),
         )
     compass_heading = _interp_angle(t, att.t_s, att.heading_rad)
     heading = compass_heading if correction is None else correction.correct(compass_heading)
