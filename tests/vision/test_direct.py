@@ -20,6 +20,7 @@ from auvnav.vision.direct import (
     along_a_line,
     fit_surface,
     inscribed_box,
+    nearer_rival,
     pair_geometry,
     plan_search,
     prepare,
@@ -312,3 +313,24 @@ def test_look_alikes_off_one_line_or_turned_are_not_one_place() -> None:
     turned = [look_alike(0.0, 0.0), look_alike(0.03, 0.0, turn_deg=np.degrees(settings.yaw_step_rad) + 0.2)]
     assert along_a_line(turned, np.zeros(3), 0.15, settings) is None
     assert along_a_line([*turned[:1], look_alike(0.03, 0.0, turn_deg=0.5)], np.zeros(3), 0.15, settings)
+
+
+def test_a_best_mode_in_the_priors_tail_yields_to_a_look_alike_near_the_prior() -> None:
+    """As on a turbid ripple field: the best mode 3.1 sigmas from the prior at correlation 0.929, a
+    look-alike 1.2 sigmas from it at 0.909 (outside the ambiguity margin): refused. Not when the
+    look-alike is in the tail too, when the best is not in the tail, or when the look-alike
+    correlates beyond the rival margin."""
+    settings = DirectSettings()
+    sigma = 0.018
+    window = settings.window_sigmas * sigma + settings.window_margin_m
+    start = np.zeros(3)
+
+    def mode(sigmas: float, correlation: float) -> tuple[Refined, bool, np.ndarray]:
+        refined, edge, where = look_alike(sigmas * sigma, 0.0)
+        return replace(refined, correlation=correlation), edge, where
+
+    assert 0.909 < 0.929 - settings.ambiguity_margin * (1 - 0.929)  # not ambiguous by correlation alone
+    assert nearer_rival([mode(3.1, 0.929), mode(1.2, 0.909)], start, window, settings)
+    assert not nearer_rival([mode(3.1, 0.929), mode(2.8, 0.909)], start, window, settings)
+    assert not nearer_rival([mode(2.0, 0.929), mode(0.5, 0.909)], start, window, settings)
+    assert not nearer_rival([mode(3.1, 0.929), mode(1.2, 0.85)], start, window, settings)

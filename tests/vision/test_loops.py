@@ -106,6 +106,18 @@ def test_features_are_cached(tiny_dive, loops_run) -> None:
     assert cache_path(cache, left, right, rig, FeatureSettings(scale=0.5)) != path
 
 
+def test_a_rerun_finds_every_verification_in_the_cache(tiny_dive, loops_run, tmp_path: Path) -> None:
+    """The same dive and cache again: every pair is tested with the same priors, so none is registered
+    anew (the network of loops is solved again as it was: test_network)."""
+    copy = tmp_path / "dive"
+    shutil.copytree(tiny_dive.path, copy)
+    result = find_loops(read_dive(copy), read_prior(copy))
+    assert loops_run["network_solves"] >= 1
+    assert result.summary["network_solves"] == loops_run["network_solves"]
+    assert result.summary["verifications_reused"] >= result.summary["candidates_tested"]
+    assert result.summary["loops_accepted"] == loops_run["loops_accepted"]
+
+
 def test_a_corrupt_feature_cache_is_recomputed(tiny_dive, tmp_path: Path, caplog) -> None:
     dive = read_dive(tiny_dive.path)
     rig = dive.vehicle.stereo

@@ -96,7 +96,7 @@ _UPPER_6 = [(r, c) for r in range(6) for c in range(r, 6)]
 _TORO_2D = [(0, 0), (0, 1), (1, 1), (2, 2), (0, 2), (1, 2)]
 
 
-def _se2(x: FloatArray, y: FloatArray, theta: FloatArray) -> FloatArray:
+def se2(x: FloatArray, y: FloatArray, theta: FloatArray) -> FloatArray:
     """Homogeneous SE(2) matrices (..., 3, 3) from position and heading (radians)."""
     c, s = np.cos(theta), np.sin(theta)
     T = np.zeros((*np.shape(x), 3, 3))
@@ -320,7 +320,7 @@ def _rotations(tag: str, values: FloatArray, path: Path, line_nos: list[int]) ->
 def _poses(tag: str, values: FloatArray, path: Path, line_nos: list[int]) -> FloatArray:
     """Homogeneous transforms from the pose fields (after the ids) of one tag's records."""
     if _RECORDS[tag].dim == 2:
-        return _se2(values[:, 0], values[:, 1], values[:, 2])
+        return se2(values[:, 0], values[:, 1], values[:, 2])
     return se3(_rotations(tag, values, path, line_nos), values[:, :3])
 
 

@@ -6,6 +6,7 @@
 - :mod:`~auvnav.vision.candidates`: footprints, overlap probability, the navigation drift model;
 - :mod:`~auvnav.vision.registration`: RANSAC, weighted and robust 3-D registration, covariance;
 - :mod:`~auvnav.vision.loops`: loop closures of a dive; :mod:`~auvnav.vision.loopfile`: ``loops.csv``;
+- :mod:`~auvnav.vision.network`: the images and their loops as one pose graph, the priors of pairs far apart;
 - :mod:`~auvnav.vision.stage`: the ``auvnav loops`` stage and its products in ``products/vision/``;
 - :mod:`~auvnav.vision.evaluate`: loop closures against a simulated dive's truth.
 """

@@ -39,7 +39,8 @@ Steps (:func:`register_direct`):
    resolution tell a ripple field's true crest from its neighbours where they can; where they
    cannot the pair is refused, not registered to the wrong crest), unless the look-alike modes are
    one place seen along a line (:func:`along_a_line`: a crest whose faint texture does not fix the
-   position along it): the estimate is then the middle of their stretch, uncertain along it.
+   position along it): the estimate is then the middle of their stretch, uncertain along it. A best
+   mode in the prior's tail with a look-alike nearer the prior is ambiguous too (:func:`nearer_rival`).
    One-dimensional texture (``max_anisotropy``) and a poor correlation reject the pair too.
 4. **Covariance**: the inverse normal matrix of the images, scaled by the residuals' variance and
    ``covariance_inflation``, plus what the images cannot see: the parallax of relief finer than the
@@ -127,6 +128,13 @@ class DirectSettings:
         29, the mode nearest the prior in 41, and no mode in 18. In 34 of them the modes lie within
         ``mode_radius_m`` of one line, and the truth lies within 1.4 cm of that line and no more
         than 1.1 cm beyond the modes' stretch along it.
+    prior_tail_sigmas, rival_margin : float
+        A best mode further than ``prior_tail_sigmas`` of the prior's 1-sigmas from the prior is
+        refused as ambiguous when another mode within ``rival_margin`` x (1 - best) of its correlation
+        lies nearer than that (:func:`nearer_rival`). The prior is then the better judge: on the check
+        dive's first 900 s in turbid water, priors from the network of loops put ripple-field pairs 9
+        images apart at a crest 5-6 cm off (3.1 sigmas) that correlates 0.02 better than the true
+        one at 1.2 sigmas.
     max_anisotropy : float
         Largest ratio of the images' information about the position along the floor in their best
         and worst directions: stripes, or ripples with no texture between the crests, fix the
@@ -180,6 +188,8 @@ class DirectSettings:
     max_peaks: int = 40
     mode_radius_m: float = 0.015
     ambiguity_margin: float = 0.25
+    prior_tail_sigmas: float = 2.5
+    rival_margin: float = 0.75
     max_anisotropy: float = 200.0
     max_across_sigma_m: float = 0.02
     max_along_sigma_m: float = 0.05
@@ -912,6 +922,26 @@ def along_a_line(
     return np.array([*(0.5 * (lo + hi) * u), 0.0]), extra
 
 
+def nearer_rival(
+    modes: list[tuple[Refined, bool, FloatArray]], start: FloatArray, window: float, settings: DirectSettings
+) -> bool:
+    """Whether the best of ``modes`` (best first; B's centre in A at each, ``start`` at the prior) lies
+    in the prior's tail, beyond ``prior_tail_sigmas``, while another within ``rival_margin`` x (1 -
+    best) of its correlation lies inside it: a ripple crest a wavelength from the true one that
+    correlates a shade better (the prior's sigma is the window's: ``(window - window_margin_m) /
+    window_sigmas``)."""
+    sigma = (window - settings.window_margin_m) / settings.window_sigmas
+    if sigma <= 0:
+        return False
+    best = modes[0][0].correlation
+    limit = best - settings.rival_margin * (1.0 - best)
+    far = [float(np.linalg.norm((where - start)[:2])) / sigma for _, _, where in modes]
+    return far[0] > settings.prior_tail_sigmas and any(
+        mode[0].correlation > limit and d <= settings.prior_tail_sigmas
+        for mode, d in zip(modes[1:], far[1:], strict=True)
+    )
+
+
 def register_direct(A: Prepared, B: Prepared, search: Search, settings: DirectSettings) -> Registration:
     """Estimate ``T_a_b`` (pair B's left camera in pair A's, unrectified camera frames, as
     :func:`auvnav.vision.registration.register`) photometrically (module docstring), within the
@@ -963,6 +993,11 @@ def register_direct(A: Prepared, B: Prepared, search: Search, settings: DirectSe
     if len(modes) > 1:
         second = modes[1][0].correlation
         limit = fine.correlation - settings.ambiguity_margin * (1.0 - fine.correlation)
+        if nearer_rival(modes, start, window, settings):
+            return rejected(
+                f"ambiguous (correlation {fine.correlation:.3f} in the prior's tail, a look-alike nearer it)",
+                T,
+            )
         if second > limit:
             alike = [mode for mode in modes if mode[0].correlation > limit]
             widening = along_a_line(alike, start, window, settings)
