@@ -2,12 +2,13 @@
 far, whose solution places pairs far apart along the track.
 
 Two images on passes far apart along the track (a lawnmower's legs hundreds of images apart) have a
-prior through the dead reckoning, or through one loop near them (:meth:`auvnav.vision.loops._Priors.anchored`),
-that is off by several centimetres: on a ripple field, a crest or more. The loops registered from
-features elsewhere tie the passes together all along them; solved together with the dead reckoning
-they place the two images within a centimetre or two (on the simulated check dive in turbid water,
-the ripple-field pairs the loop stage missed: 1.3 cm median, 3.1 cm at the 90th percentile, against
-4.3 and 10.2 cm through the nearest loop).
+prior through the dead reckoning, or through a loop near them
+(:meth:`auvnav.vision.loops._Priors.anchored`), that is off by several centimetres: on a ripple field,
+a crest or more. The loops registered from features elsewhere tie the passes together all along
+them; solved together with the dead reckoning they place the two images within a centimetre or two.
+On the simulated check dive in turbid water, for the ripple-field pairs the loop stage missed before
+the network, with the loops of a whole run: 1.3 cm median, 3.1 cm at the 90th percentile, against
+4.3 and 10.2 cm through the loops nearest them (one, or two on either side averaged).
 
 The graph is two-dimensional (north, east, heading of each image; depth and tilt stay the prior's),
 solved by GTSAM (:func:`auvnav.slam.solve.optimize_batch`, loops behind a Huber kernel): between
