@@ -172,6 +172,13 @@ def pose6(T: FloatArray) -> FloatArray:
     return np.concatenate([T[..., :3, 3], np.stack([roll, pitch, yaw], axis=-1)], axis=-1)
 
 
+def from_pose6(p6: FloatArray) -> FloatArray:
+    """4x4 transforms of ``(x, y, z, roll, pitch, yaw)`` poses (..., 6) -> (..., 4, 4): the inverse of
+    :func:`pose6`."""
+    p6 = np.asarray(p6, dtype=float)
+    return se3(euler2rot(p6[..., 5], p6[..., 4], p6[..., 3]), p6[..., :3])
+
+
 def body_pose_and_covariance(
     T_cc: FloatArray, cov_xi: FloatArray, T_bc: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
@@ -768,13 +775,12 @@ class _Priors:
     def network(self, anchors: list[Verification]) -> Network | None:
         """The network of the images and ``anchors`` (:func:`auvnav.vision.network.solve_network`), or
         None, with a warning, when GTSAM cannot solve it."""
-        p6 = np.array([v.pose6 for v in anchors])
         try:
             return solve_network(
                 se3(self.prior.R_ned_body, self.prior.p_ned_m),
                 np.array([v.i for v in anchors], dtype=np.intp),
                 np.array([v.j for v in anchors], dtype=np.intp),
-                se3(euler2rot(p6[:, 5], p6[:, 4], p6[:, 3]), p6[:, :3]),
+                from_pose6(np.array([v.pose6 for v in anchors])),
                 np.array([v.cov6 for v in anchors]),
             )
         except AuvnavError as err:
@@ -817,7 +823,7 @@ class _Priors:
             )
         best = np.argmin(sigmas, axis=1)
         m = nearest[np.arange(len(a)), best]
-        T_cd = np.array([se3(euler2rot(p[5], p[4], p[3]), p[:3]) for p in (anchors[q].pose6 for q in m)])
+        T_cd = from_pose6(np.array([anchors[q].pose6 for q in m]))
         T_cd_cam = se3_inverse(self.T_bc) @ T_cd @ self.T_bc
         T_raw = self.T_raw
         T = se3_inverse(T_raw[a]) @ T_raw[c[m]] @ T_cd_cam @ se3_inverse(T_raw[d[m]]) @ T_raw[b]
@@ -985,7 +991,7 @@ def loop_closures(accepted: list[Verification], t_s: FloatArray) -> LoopClosures
     j = np.array([v.j for v in accepted], dtype=np.int64)
     p6 = np.array([v.pose6 for v in accepted]).reshape(-1, 6)
     cov = np.array([v.cov6 for v in accepted]).reshape(-1, 6, 6)
-    T = se3(euler2rot(p6[:, 5], p6[:, 4], p6[:, 3]), p6[:, :3])
+    T = from_pose6(p6)
     inliers = np.array([v.inliers for v in accepted], dtype=np.int64)
     method = np.array(["images" if v.direct else "features" for v in accepted], dtype=str)
     return loops_from_transforms(i, j, t_s[i], t_s[j], T, cov, inliers, method)

@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from auvnav.frames import FloatArray, rot2euler, rot_z, se3_inverse
-from auvnav.slam.g2o import PoseGraph, se2
+from auvnav.slam.g2o import PoseGraph, inverse_rigid, se2
 from auvnav.slam.solve import optimize_batch, to_gtsam
 
 #: The dead reckoning's error over one step between consecutive images, 1-sigma per axis, as a fraction of
@@ -69,7 +69,6 @@ class Network:
         self, a: NDArray[np.intp], b: NDArray[np.intp], T_body_cam: FloatArray
     ) -> tuple[FloatArray, FloatArray]:
         """The camera pose of image b in image a (K, 4, 4) and its lateral 1-sigma (K,), metres."""
-        T = self.T_ned_body @ T_body_cam
         sigma = np.empty(len(a))
         for k, (i, j) in enumerate(zip(a.tolist(), b.tolist(), strict=True)):
             keys = gtsam.KeyVector()
@@ -80,7 +79,8 @@ class Network:
             H = np.hstack([-between.inverse().AdjointMap(), np.eye(3)])
             cov = H @ joint @ H.T
             sigma[k] = np.sqrt(max(np.linalg.eigvalsh(cov[:2, :2])[-1], 0.0))
-        return se3_inverse(T[a]) @ T[b], sigma
+        T_a, T_b = self.T_ned_body[a] @ T_body_cam, self.T_ned_body[b] @ T_body_cam
+        return se3_inverse(T_a) @ T_b, sigma
 
 
 def solve_network(
@@ -99,7 +99,7 @@ def solve_network(
     tilt = np.swapaxes(rot_z(yaw), 1, 2) @ T_ned_body[:, :3, :3]
     p = T_ned_body[:, :3, 3]
     poses = se2(p[:, 0], p[:, 1], yaw)
-    steps = np.linalg.inv(poses[:-1]) @ poses[1:]
+    steps = inverse_rigid(poses[:-1]) @ poses[1:]
     length = np.hypot(steps[:, 0, 2], steps[:, 1, 2])
     turn = np.abs(np.arctan2(steps[:, 1, 0], steps[:, 0, 0]))
     xy = np.maximum(STEP_DRIFT_FRACTION * length, STEP_FLOOR_M)
