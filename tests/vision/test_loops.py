@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import logging
 import shutil
@@ -239,3 +240,29 @@ def test_the_prior_through_a_registered_loop_is_exact_when_each_pass_is() -> Non
     np.testing.assert_allclose(T[0], truth, atol=1e-9)
     leg = SHORT_SIGMA_FLOOR_M**2 + SHORT_DRIFT_FRACTION**2  # a 1 m leg's variance
     assert sigma[0] == pytest.approx(np.sqrt(2 * leg + 2 * 0.002**2 + 0.002**2), rel=1e-9)
+
+
+def test_a_network_gtsam_cannot_solve_is_tried_again_only_as_the_loops_grow(
+    tiny_dive, tmp_path: Path, monkeypatch, caplog
+) -> None:
+    """When GTSAM fails on the network of loops, the stage warns and keeps the priors through single
+    loops; it tries again once the loops from features have grown by NETWORK_GROWTH, not every round."""
+    from auvnav.errors import AuvnavError
+    from auvnav.vision import loops as stage_loops
+
+    tried: list[int] = []
+
+    def failing(T_ned_body: np.ndarray, i: np.ndarray, *_: object) -> None:
+        tried.append(len(i))
+        raise AuvnavError("indeterminant system")
+
+    monkeypatch.setattr(stage_loops, "solve_network", failing)
+    copy = tmp_path / "dive"
+    shutil.copytree(tiny_dive.path, copy)
+    with caplog.at_level(logging.WARNING):
+        result = find_loops(read_dive(copy), read_prior(copy))
+    assert tried and "the network of" in caplog.text and "not solved" in caplog.text
+    assert result.summary["network_solves"] == len(tried)
+    assert all(b > (1 + stage_loops.NETWORK_GROWTH) * a for a, b in itertools.pairwise(tried))
+    assert len(tried) < result.summary["rounds"]
+    assert result.summary["nonconsecutive_accepted"] > 3

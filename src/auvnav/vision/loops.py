@@ -604,7 +604,7 @@ def find_loops(
     reused = 0
     anchors: list[Verification] = []
     network: Network | None = None
-    network_solves, network_s = 0, 0.0
+    network_solves, network_s, network_from = 0, 0.0, 0  # network_from: the loops at the last attempt
     searched: dict[tuple[int, int], float] = {}  # each tested pair's direct search sigma
     while todo and rounds < settings.max_rounds:
         rounds += 1
@@ -627,13 +627,13 @@ def find_loops(
             tested[(v.i, v.j)] = v
         _refit(drift, fp_u, tested)
         anchors = _anchors(tested)
-        if settings.direct is not None and len(anchors) > (1 + NETWORK_GROWTH) * (
-            network.loops if network else 0
-        ):
+        if settings.direct is not None and len(anchors) > (1 + NETWORK_GROWTH) * network_from:
+            # tried again only once the loops have grown, whether or not GTSAM solved it last time
             solving = time.perf_counter()
-            network = priors.network(anchors)
+            network = priors.network(anchors) or network
             network_s += time.perf_counter() - solving
             network_solves += 1
+            network_from = len(anchors)
         ci, cj, _ = candidate_pairs(fp_u, drift, settings.candidates, exclude=set(tested))
         # Verified in image order: a worker's chunk then shares feature files (its cache).
         todo = sorted(_limit_per_image(ci, cj, settings.per_image_per_round))
@@ -774,7 +774,7 @@ class _Priors:
 
     def network(self, anchors: list[Verification]) -> Network | None:
         """The network of the images and ``anchors`` (:func:`auvnav.vision.network.solve_network`), or
-        None, with a warning, when GTSAM cannot solve it."""
+        None, with a warning, when GTSAM cannot solve it (the stage then keeps the network it had)."""
         try:
             return solve_network(
                 se3(self.prior.R_ned_body, self.prior.p_ned_m),
