@@ -84,6 +84,16 @@ def test_se3_inverse(T: np.ndarray) -> None:
     np.testing.assert_allclose(F.se3_compose(T, F.se3_inverse(T)), np.eye(4), atol=1e-9)
 
 
+@given(transforms())
+def test_pose6_round_trip(T: np.ndarray) -> None:
+    """A loop's six numbers (x, y, z, roll, pitch, yaw) and back, also for a stack of transforms."""
+    p6 = F.pose6(T)
+    np.testing.assert_allclose(p6[:3], T[:3, 3])
+    np.testing.assert_allclose(F.from_pose6(p6), T, atol=1e-9)
+    stack = np.stack([T, F.se3_inverse(T)])
+    np.testing.assert_allclose(F.from_pose6(F.pose6(stack)), stack, atol=1e-6)
+
+
 @given(transforms(), transforms(), transforms())
 def test_se3_associative(A: np.ndarray, B: np.ndarray, C: np.ndarray) -> None:
     np.testing.assert_allclose(

@@ -164,6 +164,21 @@ def se3_inverse(T_ab: ArrayLike) -> FloatArray:
     return se3(Rt, -(Rt @ T[..., :3, 3, None])[..., 0])
 
 
+def pose6(T: ArrayLike) -> FloatArray:
+    """``(x, y, z, roll, pitch, yaw)`` of 4x4 transforms (..., 4, 4) -> (..., 6) (Euler ZYX): a loop
+    closure's six numbers (``loops.csv``)."""
+    T = np.asarray(T, dtype=float)
+    yaw, pitch, roll = rot2euler(T[..., :3, :3])
+    return np.concatenate([T[..., :3, 3], np.stack([roll, pitch, yaw], axis=-1)], axis=-1)
+
+
+def from_pose6(p6: ArrayLike) -> FloatArray:
+    """4x4 transforms of ``(x, y, z, roll, pitch, yaw)`` poses (..., 6) -> (..., 4, 4): the inverse of
+    :func:`pose6`."""
+    p6 = np.asarray(p6, dtype=float)
+    return se3(euler2rot(p6[..., 5], p6[..., 4], p6[..., 3]), p6[..., :3])
+
+
 def se3_apply(T_ab: ArrayLike, p_b: ArrayLike) -> FloatArray:
     """Points (..., 3) in frame b mapped to frame a. One transform applied to many points goes through
     ``cv2.transform`` (on 20,000 points, 50 times faster than numpy's matrix product)."""

@@ -209,6 +209,7 @@ def test_the_prior_through_a_registered_loop_is_exact_when_each_pass_is() -> Non
     (turned 3 degrees and shifted 36 cm: what a compass deviation leaves); with the loop (5, 34)
     registered, the pair (7, 32) is placed through it to the truth, with the sigma of two 1 m legs
     of dead reckoning and the loop, and the nearer of two loops is the one used."""
+    from auvnav.frames import pose6 as to_pose6
     from auvnav.frames import rot_z, se3, se3_inverse
     from auvnav.vision.loops import (
         SHORT_DRIFT_FRACTION,
@@ -217,7 +218,6 @@ def test_the_prior_through_a_registered_loop_is_exact_when_each_pass_is() -> Non
         _Priors,
         path_turn,
     )
-    from auvnav.vision.loops import pose6 as to_pose6
 
     k = np.arange(40)
     first = k < 20

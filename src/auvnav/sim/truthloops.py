@@ -52,7 +52,7 @@ from scipy.spatial import cKDTree
 from auvnav.dive import ImageIndex, vehicle_file_name
 from auvnav.errors import ConfigError
 from auvnav.footprint import SeafloorLike, footprints, overlapping_pairs
-from auvnav.frames import FloatArray, euler2rot, se3, se3_inverse
+from auvnav.frames import FloatArray, from_pose6, se3_inverse
 from auvnav.sim.camera import (
     body_poses,
     default_stereo_rig,
@@ -227,7 +227,7 @@ def truth_loops(
         jj,
         times[ii],
         times[jj],
-        se3(euler2rot(all6[:, 5], all6[:, 4], all6[:, 3]), all6[:, :3]),
+        from_pose6(all6),
         np.ascontiguousarray(cov),
         inliers,
     )

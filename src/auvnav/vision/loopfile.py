@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from auvnav.errors import DiveFormatError
-from auvnav.frames import euler2rot, rot2euler, se3
+from auvnav.frames import from_pose6, pose6
 from auvnav.products import LOOPS
 from auvnav.streams import Field, Stream, flag_rows, read_stream, write_stream
 
@@ -87,8 +87,7 @@ class LoopClosures(Stream):
     @property
     def T_i_j(self) -> NDArray[np.float64]:
         """Relative poses as 4x4 transforms, shape (N, 4, 4)."""
-        r, p, y = self.rpy_ij_rad.T
-        return se3(euler2rot(y, p, r), self.t_ij_m)
+        return from_pose6(np.column_stack([self.t_ij_m, self.rpy_ij_rad]))
 
 
 def loops_from_transforms(
@@ -102,15 +101,15 @@ def loops_from_transforms(
     method: NDArray[np.str_] | None = None,
 ) -> LoopClosures:
     """Build :class:`LoopClosures` from 4x4 relative poses and 6x6 covariances (x, y, z, r, p, y order)."""
-    yaw, pitch, roll = rot2euler(T_i_j[:, :3, :3])
+    p6 = pose6(T_i_j).reshape(-1, 6)
     a, b = zip(*_UPPER, strict=True)
     return LoopClosures(
         i=np.asarray(i, dtype=np.int64),
         j=np.asarray(j, dtype=np.int64),
         t_i_s=np.asarray(t_i_s, dtype=float),
         t_j_s=np.asarray(t_j_s, dtype=float),
-        t_ij_m=T_i_j[:, :3, 3].copy(),
-        rpy_ij_rad=np.column_stack([roll, pitch, yaw]),
+        t_ij_m=p6[:, :3],
+        rpy_ij_rad=p6[:, 3:],
         cov_upper=covariance[:, list(a), list(b)],
         inliers=np.asarray(inliers, dtype=np.int64),
         method=None if method is None else np.asarray(method, dtype=str),

@@ -59,7 +59,7 @@ from auvnav import products as P
 from auvnav.dive import Dive, ImageIndex
 from auvnav.errors import AuvnavError, ConfigError, InsufficientDataError
 from auvnav.executor import Executor, SerialExecutor, chunks
-from auvnav.frames import angle_diff, euler2rot, rot2euler, se3, se3_inverse, wrap_angle
+from auvnav.frames import angle_diff, from_pose6, pose6, se3, se3_inverse, wrap_angle
 from auvnav.streams import atomic_write
 from auvnav.trajectory import Trajectory
 from auvnav.vehicle import StereoRig
@@ -164,19 +164,6 @@ class LoopResult:
     loops: LoopClosures
     tested: list[Verification]
     summary: dict[str, Any]
-
-
-def pose6(T: FloatArray) -> FloatArray:
-    """``(x, y, z, roll, pitch, yaw)`` of 4x4 transforms (..., 4, 4) -> (..., 6) (Euler ZYX)."""
-    yaw, pitch, roll = rot2euler(T[..., :3, :3])
-    return np.concatenate([T[..., :3, 3], np.stack([roll, pitch, yaw], axis=-1)], axis=-1)
-
-
-def from_pose6(p6: FloatArray) -> FloatArray:
-    """4x4 transforms of ``(x, y, z, roll, pitch, yaw)`` poses (..., 6) -> (..., 4, 4): the inverse of
-    :func:`pose6`."""
-    p6 = np.asarray(p6, dtype=float)
-    return se3(euler2rot(p6[..., 5], p6[..., 4], p6[..., 3]), p6[..., :3])
 
 
 def body_pose_and_covariance(
