@@ -542,16 +542,10 @@ def marginal_covariances(
         Covariance of the right perturbation ``T = T_hat @ exp(xi)`` in the pose's own frame, order
         (x, y, theta) in 2D (metres, radians) or (x, y, z, rx, ry, rz) in 3D.
     """
-    if exclude_edges is not None and len(exclude_edges):
-        keep = np.ones(graph.n_edges, dtype=bool)
-        keep[np.asarray(exclude_edges, dtype=np.int64)] = False
-        graph = graph.subgraph(keep)
-    _check_connected(graph)
     wanted = graph.ids if ids is None else np.asarray(ids, dtype=np.int64)
     graph.rows(wanted)  # unknown ids raise ValueError before the factorisation
-    factor_graph, values = to_gtsam(graph)
+    marginals, _ = solution_marginals(graph, exclude_edges=exclude_edges)
     try:
-        marginals = gtsam.Marginals(factor_graph, values)
         cov = np.stack([marginals.marginalCovariance(int(key)) for key in wanted])
     except RuntimeError as err:
         raise PoseGraphSolveError(
@@ -560,3 +554,24 @@ def marginal_covariances(
     if graph.dim == 3:
         cov = cov[:, _PERM_3D][:, :, _PERM_3D]
     return cov
+
+
+def solution_marginals(
+    graph: PoseGraph, *, exclude_edges: IntArray | None = None, robust: Robust = "none"
+) -> tuple[gtsam.Marginals, gtsam.Values]:
+    """GTSAM's marginals of a graph linearised at its poses (normally a solution's ``graph``), without
+    the edges ``exclude_edges`` (e.g. ``SolveResult.rejected``), loop closures behind the ``robust``
+    kernel; and the values they were linearised at (keyed by vertex id). A factorisation GTSAM
+    cannot do raises :class:`PoseGraphSolveError`."""
+    if exclude_edges is not None and len(exclude_edges):
+        keep = np.ones(graph.n_edges, dtype=bool)
+        keep[np.asarray(exclude_edges, dtype=np.int64)] = False
+        graph = graph.subgraph(keep)
+    _check_connected(graph)
+    factor_graph, values = to_gtsam(graph, robust=robust)
+    try:
+        return gtsam.Marginals(factor_graph, values), values
+    except RuntimeError as err:
+        raise PoseGraphSolveError(
+            f"{graph.source or 'pose graph'}: marginals failed: {one_line(err)}"
+        ) from None

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 from auvnav.frames import FloatArray, rot2euler, rot_z, se3_inverse
 from auvnav.slam.g2o import PoseGraph, inverse_rigid, se2
-from auvnav.slam.solve import optimize_batch, to_gtsam
+from auvnav.slam.solve import optimize_batch, solution_marginals
 
 #: The dead reckoning's error over one step between consecutive images, 1-sigma per axis, as a fraction of
 #: the step's length (the DVL's scale error and the compass's noise turning it; see
@@ -127,12 +127,10 @@ def solve_network(
         "the loop stage's network of images",
     )
     solved = optimize_batch(graph, robust="huber")
-    kept = np.ones(graph.n_edges, dtype=bool)
-    kept[solved.rejected] = False
-    factors, values = to_gtsam(solved.graph.subgraph(kept), robust="huber")
+    marginals, values = solution_marginals(solved.graph, exclude_edges=solved.rejected, robust="huber")
     X = solved.graph.T_world_pose
     turned = np.arctan2(X[:, 1, 0], X[:, 0, 0]) - yaw
     T = T_ned_body.copy()
     T[:, :3, :3] = rot_z(turned) @ T_ned_body[:, :3, :3]
     T[:, :2, 3] = X[:, :2, 2]
-    return Network(T, len(i), gtsam.Marginals(factors, values), values)
+    return Network(T, len(i), marginals, values)
