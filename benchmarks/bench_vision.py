@@ -179,10 +179,10 @@ def main() -> None:
         results["half"] = loops(dive, usage, fresh=True, settings=settings)
     results["half_peak_memory_mib"] = usage.peak_mib
     if args.speed_seconds > 0:
-        cut = args.work / f"navcheck{water}-{args.speed_seconds:.0f}s-x1"
-        results["full_render"] = render(cut, 1.0, args.speed_seconds, args.water, args.raw)
+        full_dive = args.work / f"navcheck{water}-{args.speed_seconds:.0f}s-x1"
+        results["full_render"] = render(full_dive, 1.0, args.speed_seconds, args.water, args.raw)
         with TreeUsage() as usage:
-            results["full"] = loops(cut, usage, fresh=True, settings=settings)
+            results["full"] = loops(full_dive, usage, fresh=True, settings=settings)
         results["full_peak_memory_mib"] = usage.peak_mib
     results["load_average_end"] = os.getloadavg()
     (args.work / f"results{water}{cut}.json").write_text(
