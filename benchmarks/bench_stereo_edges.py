@@ -5,7 +5,7 @@ the reef's ledges and boulders), seen level from 2 m by the default rig at ``--i
 ``--water``. Every stereo match of the front end (:func:`~auvnav.vision.stereo.stereo_features`) is
 compared with the truth: the left keypoint's ray cast into the scene, the hit point projected into the
 rectified right image. A match is *near a depth edge* when the true disparity varies by more than 1 px
-over the patch that was tracked (``lk_window_px`` at the SIFT scale). Prints, for matches near edges and
+over the patch that was tracked (:meth:`~auvnav.vision.features.FeatureSettings.lk_window_for`). Prints, for matches near edges and
 away from them: how many, the fraction within 1 px of the truth, and the median Mahalanobis distance of
 the range error under the point's covariance (honest: about 0.67 for one degree of freedom).
 
@@ -69,7 +69,7 @@ def scene_errors(seed: int, scale: float, water: str, settings: FeatureSettings)
     d_meas = uv[:, 0] - uv[:, 2]
     d_true = true_disparity(scene, rig, rect, T_left, uv[:, :2])
     # The disparity's spread over the tracked patch (a 5 x 5 grid of it).
-    half = 0.5 * settings.lk_window_px / settings.scale_for(rig.left.width)
+    half = 0.5 * settings.lk_window_for(rig.left.width)
     offsets = np.linspace(-half, half, 5)
     spread_lo, spread_hi = np.full(len(uv), np.inf), np.full(len(uv), -np.inf)
     for du in offsets:

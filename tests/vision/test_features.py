@@ -69,6 +69,26 @@ def test_stereo_matches_lie_on_the_floor(flat_floor, image_scale: float) -> None
     assert np.median(feats.p_cam_m[:, 2]) == pytest.approx(range_m, rel=0.002)
 
 
+@given(
+    st.integers(1, 64),
+    st.one_of(st.none(), st.floats(0.05, 1.0)),
+    st.sampled_from([340, 680, 1360, 2464]),
+)
+def test_the_stereo_window_is_the_odd_side_nearest_the_setting(
+    side: int, scale: float | None, width: int
+) -> None:
+    settings = FeatureSettings(lk_window_px=side, scale=scale)
+    window = settings.lk_window_for(width)
+    assert window % 2 == 1
+    assert abs(window - side / settings.scale_for(width)) <= 1.0
+
+
+def test_the_default_stereo_window_is_the_one_the_benchmarks_measured() -> None:
+    # 17 px on the half-scale images, where SIFT runs at their own size; twice as wide on full-size ones
+    assert FeatureSettings().lk_window_for(680) == 17
+    assert FeatureSettings().lk_window_for(1360) == 35
+
+
 @given(st.lists(st.integers(0, 255), min_size=2, max_size=128))
 def test_companding_is_monotonic_and_spans_4_bits(values: list[int]) -> None:
     d = np.array(sorted(values), dtype=np.uint8)[None, :]

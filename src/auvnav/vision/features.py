@@ -41,8 +41,8 @@ class FeatureSettings:
         ``DEFAULT_FEATURE_WIDTH_PX`` wide (never enlarged).
     max_features : int
         Keypoints kept per image, strongest first (``auvnav loops --features``). 1,500 with
-        ``lk_window_px`` 15 ran the navigation check dive's front end 1.45 times faster than 2,500 with
-        a 21 px window, for a median loop rotation error 0.01 deg larger (0.069 against 0.059 deg;
+        a 17 px stereo window ran the navigation check dive's front end 1.45 times faster than 2,500
+        with a 21 px window, for a median loop rotation error 0.01 deg larger (0.069 against 0.059 deg;
         ``benchmarks/bench_vision.py``, the procedural reef before issue 20).
     contrast_threshold : float
         SIFT's contrast threshold (OpenCV ``contrastThreshold``), on illumination-corrected images
@@ -56,7 +56,9 @@ class FeatureSettings:
         pixels of the image SIFT runs on.
     lk_window_px : int
         Side of the patch tracked from the left image into the right one, pixels of the image SIFT
-        runs on.
+        runs on; the tracker's window in the rectified image is the odd number of pixels nearest it
+        (:meth:`lk_window_for`). 17: the window every benchmark of the half-scale images measured
+        (until 2026-11-28 the default read 15, which the rounding then in use made 17).
     max_round_trip_px : float
         Largest distance, pixels of the image SIFT runs on, between a left keypoint and where it lands
         when tracked to the right image and back.
@@ -110,7 +112,7 @@ class FeatureSettings:
     thumbnail_scale: float = 0.5
     sigma_px: float = 0.4
     stereo_gate_px: float = 2.0
-    lk_window_px: int = 15
+    lk_window_px: int = 17
     max_round_trip_px: float = 0.5
     min_range_m: float = 0.5
     max_range_m: float = 12.0
@@ -145,6 +147,11 @@ class FeatureSettings:
         if self.scale is not None:
             return self.scale
         return min(1.0, DEFAULT_FEATURE_WIDTH_PX / width_px)
+
+    def lk_window_for(self, width_px: int) -> int:
+        """The stereo tracker's window side, pixels of images ``width_px`` wide: ``lk_window_px`` at
+        the SIFT scale, to the nearest odd number (the larger one on a tie)."""
+        return 2 * int(self.lk_window_px / self.scale_for(width_px) // 2) + 1
 
     def key(self) -> str:
         """A stable text form for cache keys."""

@@ -255,7 +255,7 @@ def track_right(
     if n == 0:
         return np.zeros((0, 2)), ok, np.zeros(0), np.ones(0)
     scale = settings.scale_for(left_rect.shape[1])
-    window = 2 * round(settings.lk_window_px / scale / 2) + 1
+    window = settings.lk_window_for(left_rect.shape[1])
     lk = {
         "winSize": (window, window),
         "criteria": (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01),
