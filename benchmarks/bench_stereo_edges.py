@@ -5,9 +5,10 @@ the reef's ledges and boulders), seen level from 2 m by the default rig at ``--i
 ``--water``. Every stereo match of the front end (:func:`~auvnav.vision.stereo.stereo_features`) is
 compared with the truth: the left keypoint's ray cast into the scene, the hit point projected into the
 rectified right image. A match is *near a depth edge* when the true disparity varies by more than 1 px
-over the patch that was tracked (:meth:`~auvnav.vision.features.FeatureSettings.lk_window_for`). Prints, for matches near edges and
-away from them: how many, the fraction within 1 px of the truth, and the median Mahalanobis distance of
-the range error under the point's covariance (honest: about 0.67 for one degree of freedom).
+over the patch that was tracked (:meth:`~auvnav.vision.features.FeatureSettings.lk_window_for`). Prints,
+for matches near edges and away from them: how many, the fraction within 1 px of the truth, and the
+median Mahalanobis distance of the range error under the point's covariance (honest: about 0.67 for one
+degree of freedom).
 
 Usage: ``.venv/bin/python benchmarks/bench_stereo_edges.py [--scenes 12] [--image-scale 0.5]
 [--water clear] [--set NAME=VALUE ...]`` (``--set`` as :class:`~auvnav.vision.features.FeatureSettings`
