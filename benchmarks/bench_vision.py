@@ -174,10 +174,17 @@ def main() -> None:
         "settings": values,
         "load_average": os.getloadavg(),
     }
+    out = args.work / f"results{water}{cut}.json"
+
+    def save() -> None:
+        out.write_text(json.dumps(results, indent=2, default=float), encoding="utf-8")
+
     results.update(render(dive, args.image_scale, args.seconds, args.water, args.raw))
     with TreeUsage() as usage:
         results["half"] = loops(dive, usage, fresh=True, settings=settings)
     results["half_peak_memory_mib"] = usage.peak_mib
+    save()  # the half-scale figures are kept should the full-scale run fail
+    print(f"half scale done: {out}", flush=True)
     if args.speed_seconds > 0:
         full_dive = args.work / f"navcheck{water}-{args.speed_seconds:.0f}s-x1"
         results["full_render"] = render(full_dive, 1.0, args.speed_seconds, args.water, args.raw)
@@ -185,9 +192,7 @@ def main() -> None:
             results["full"] = loops(full_dive, usage, fresh=True, settings=settings)
         results["full_peak_memory_mib"] = usage.peak_mib
     results["load_average_end"] = os.getloadavg()
-    (args.work / f"results{water}{cut}.json").write_text(
-        json.dumps(results, indent=2, default=float), encoding="utf-8"
-    )
+    save()
     print(json.dumps(results, indent=2, default=float))
     half = results["half"]
     assert isinstance(half, dict)
