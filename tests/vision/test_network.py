@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import gtsam
 import numpy as np
+import pytest
 
 from auvnav.frames import euler2rot, rot_z, se3, se3_inverse
+from auvnav.vision import network as network_module
 from auvnav.vision.network import solve_network
 
 
@@ -52,3 +55,42 @@ def test_the_network_places_a_pair_between_loops_that_the_dead_reckoning_misplac
     # away from every loop (the far end of the passes), the network is less certain
     far = network.relative(np.array([10]), np.array([29]), T_bc)[1]
     assert far[0] > sigma[0]
+
+
+def test_relative_sigmas_from_joints_of_many_images_are_those_of_each_pair_alone(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Pairs of a 30-image track with loops, in no order and with repeats, their joints asked four
+    images at a time: each lateral sigma is the one its own pair's joint marginal covariance gives."""
+    rng = np.random.default_rng(3)
+    n = 30
+    T = se3(
+        np.tile(np.eye(3), (n, 1, 1)), np.column_stack([0.4 * np.arange(n), np.zeros(n), np.full(n, 10.0)])
+    )
+    i, j = np.array([0, 5, 12]), np.array([20, 25, 29])
+    cov = np.broadcast_to(np.diag([1e-4] * 3 + [1e-5] * 3), (3, 6, 6)).copy()
+    net = solve_network(T, i, j, se3_inverse(T[i]) @ T[j], cov)
+    a = rng.integers(0, n, 40)
+    b = rng.integers(0, n, 40)
+    b[b == a] = (a[b == a] + 7) % n
+    monkeypatch.setattr(network_module, "JOINT_IMAGES", 4)
+    _, sigma = net.relative(a, b, np.eye(4))
+    for k in range(len(a)):
+        keys = gtsam.KeyVector()
+        keys.append(int(a[k]))
+        keys.append(int(b[k]))
+        joint = net.marginals.jointMarginalCovariance(keys).fullMatrix()
+        between = net.solution.atPose2(int(a[k])).between(net.solution.atPose2(int(b[k])))
+        H = np.hstack([-between.inverse().AdjointMap(), np.eye(3)])
+        alone = np.sqrt(np.linalg.eigvalsh((H @ joint @ H.T)[:2, :2])[-1])
+        assert sigma[k] == pytest.approx(alone, rel=1e-9)
+    assert len(set(np.round(sigma, 6))) > 10  # the pairs differ: a mix-up would show
+
+
+def test_chunks_hold_at_most_the_limit_of_images_and_every_pair_once() -> None:
+    rng = np.random.default_rng(4)
+    a, b = rng.integers(0, 50, 200), rng.integers(0, 50, 200)
+    chunks = network_module._chunks(a, b, 10)
+    assert sorted(np.concatenate(chunks).tolist()) == list(range(200))
+    for chunk in chunks:
+        assert len(chunk) == 1 or len(np.unique(np.concatenate([a[chunk], b[chunk]]))) <= 10

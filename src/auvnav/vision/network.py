@@ -68,19 +68,51 @@ class Network:
     def relative(
         self, a: NDArray[np.intp], b: NDArray[np.intp], T_body_cam: FloatArray
     ) -> tuple[FloatArray, FloatArray]:
-        """The camera pose of image b in image a (K, 4, 4) and its lateral 1-sigma (K,), metres."""
+        """The camera pose of image b in image a (K, 4, 4) and its lateral 1-sigma (K,), metres.
+
+        The pairs' joint marginal covariances come from GTSAM's joint over up to
+        :data:`JOINT_IMAGES` images at a time, the pairs grouped by their first image: over the whole
+        check dive in turbid water, its networks' 15,124 pairs take 5.4 CPU s instead of 42.9 as one
+        joint a pair, the same sigmas to 1e-9."""
         sigma = np.empty(len(a))
-        for k, (i, j) in enumerate(zip(a.tolist(), b.tolist(), strict=True)):
+        for chunk in _chunks(a, b, JOINT_IMAGES):
             keys = gtsam.KeyVector()
-            keys.append(i)
-            keys.append(j)
-            joint = self.marginals.jointMarginalCovariance(keys).fullMatrix()
-            between = self.solution.atPose2(i).between(self.solution.atPose2(j))
-            H = np.hstack([-between.inverse().AdjointMap(), np.eye(3)])
-            cov = H @ joint @ H.T
-            sigma[k] = np.sqrt(max(np.linalg.eigvalsh(cov[:2, :2])[-1], 0.0))
+            for key in np.unique(np.concatenate([a[chunk], b[chunk]])).tolist():
+                keys.append(key)
+            joint = self.marginals.jointMarginalCovariance(keys)
+            for k in chunk.tolist():
+                i, j = int(a[k]), int(b[k])
+                C = np.block([[joint.at(i, i), joint.at(i, j)], [joint.at(j, i), joint.at(j, j)]])
+                between = self.solution.atPose2(i).between(self.solution.atPose2(j))
+                H = np.hstack([-between.inverse().AdjointMap(), np.eye(3)])
+                cov = H @ C @ H.T
+                sigma[k] = np.sqrt(max(np.linalg.eigvalsh(cov[:2, :2])[-1], 0.0))
         T_a, T_b = self.T_ned_body[a] @ T_body_cam, self.T_ned_body[b] @ T_body_cam
         return se3_inverse(T_a) @ T_b, sigma
+
+
+#: :meth:`Network.relative` asks GTSAM for the joint marginal covariance of this many images at most at
+#: once (whole check dive, turbid water, its largest network's pairs: 3.1 CPU s at 32, 2.4 at 64 and
+#: 128, 4.1 at 256, 4.6 for each round's pairs at once).
+JOINT_IMAGES = 64
+
+
+def _chunks(a: NDArray[np.intp], b: NDArray[np.intp], limit: int) -> list[NDArray[np.intp]]:
+    """Indices of pairs (a, b), ordered by a then b, in consecutive runs that each hold at most ``limit``
+    distinct images (or a single pair)."""
+    chunks: list[NDArray[np.intp]] = []
+    run: list[int] = []
+    images: set[int] = set()
+    for k in np.lexsort((b, a)).tolist():
+        pair = {int(a[k]), int(b[k])}
+        if run and len(images | pair) > limit:
+            chunks.append(np.array(run, dtype=np.intp))
+            run, images = [], set()
+        run.append(k)
+        images |= pair
+    if run:
+        chunks.append(np.array(run, dtype=np.intp))
+    return chunks
 
 
 def solve_network(
