@@ -326,7 +326,10 @@ def _read_verified(verify_dir: Path) -> dict[bytes, np.void]:
             log.warning("%s: unreadable verification cache file ignored", path)
             continue
         if records.dtype == _VERIFY_RECORD:
-            out.update((bytes(r["key"]), r) for r in records)
+            # NumPy gives a bytes field back without its trailing NUL bytes: pad the key to its
+            # length again, or one verification in 256 (a key ending in 0x00) is never found
+            size = _VERIFY_RECORD["key"].itemsize
+            out.update((bytes(r["key"]).ljust(size, b"\0"), r) for r in records)
     return out
 
 
